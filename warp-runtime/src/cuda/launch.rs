@@ -269,14 +269,16 @@ impl<K: Kernel> Prepared<K> {
         (ctx.fault, ctx.fault_flag) =
             fault::with_record(&st.faults, ordinal, id, |r| r.addresses())?;
         ctx.launch = id.0;
-        if config::debug() {
+        // Read once: the kernel's flag, the stream kept and the wait below agree.
+        let debug = config::debug();
+        if debug {
             ctx.flags |= CTX_DEBUG;
         }
         // Debug mode's wait after the launch: on a stream the caller orders (torch's, XLA's),
         // that stream alone (see below).
         let mut caller_stream = None;
         st.queue(ordinal, stream, |on| {
-            if config::debug() && on.is_caller_ordered() {
+            if debug && on.is_caller_ordered() {
                 caller_stream = Some(on.clone());
             }
             if plain_own && st.alone(on) {
@@ -324,7 +326,7 @@ impl<K: Kernel> Prepared<K> {
             r.reduce(st, device, ordinal, fns, stream)?;
         }
         // (Inside a capture nothing has run yet: there is nothing to check.)
-        if config::debug() && super::gpu::capture_stream(ordinal).is_none() {
+        if debug && super::gpu::capture_stream(ordinal).is_none() {
             match caller_stream {
                 // The caller's stream: waiting for the whole device would wait for its other
                 // streams too and, while the caller captures this one into a graph (XLA's
