@@ -4,10 +4,11 @@
 //! (`cuLaunchKernel` through `warp_cuda`) and as a raw graph, and beside NVIDIA Warp 1.19
 //! (`benches/py/warp_graph.py`: `wp.launch`, `wp.Launch`, `wp.capture_launch`) in the same
 //! run. Every mode's result is compared with the plain launches' (bit for bit) and with the
-//! closed form of the oscillator it integrates. Two more raw graphs of the hand-written
-//! kernels, one with as many parameter bytes as warp-lang's kernels take and one with its
-//! 64-bit grid-stride loop, say which of the two explains the gap between warp-lang's graph
-//! replay and the raw one.
+//! closed form of the oscillator it integrates. The hand-written substep as a raw graph
+//! replayed 1000 times is the floor of the replays of warp-lang's substep graph. Two more raw
+//! graphs of the hand-written kernels, one with as many parameter bytes as warp-lang's kernels
+//! take and one with a 64-bit grid-stride loop (warp-lang's entries had one until their
+//! threads became one per element), say what each costs a graph replay.
 //!
 //! ```text
 //! cargo bench --bench graph                    # needs a CUDA device; SKIPPED otherwise
@@ -349,6 +350,26 @@ fn main() -> wp::Result<()> {
     let t = timed(|| raw_loop(&default))?;
     let r = raw_result(&mut || raw_loop(&default))?;
     record("hand-written CUDA, raw launches", t, r, None);
+    // The floor of "graph of a substep x 1000": the hand kernels' substep (10 launches) as a
+    // raw graph, replayed 1000 times (each replay pays a graph launch).
+    {
+        let stream = hand.gpu.new_stream().expect("stream");
+        stream.begin_capture().expect("capture");
+        for _ in 0..PAIRS {
+            hand.velocity(HandVariant::Plain, &stream, xp, vp);
+            hand.position(HandVariant::Plain, &stream, xp, vp);
+        }
+        let graph = stream.end_capture(&hand.gpu).expect("graph");
+        let mut replays = || -> wp::Result<()> {
+            for _ in 0..SUBSTEPS {
+                graph.launch(&default).expect("graph launch");
+            }
+            Ok(())
+        };
+        let t = timed(&mut replays)?;
+        let r = raw_result(&mut replays)?;
+        record("hand, raw graph of a substep x 1000", t, r, None);
+    }
     // Raw graphs: the hand kernels, and, to tell what of the gap between warp-lang's graph and
     // the raw one is parameter bytes and what the loop, the same with warp-lang's parameter
     // size and with its loop.

@@ -19,6 +19,8 @@
 # device memory never written (arrays are zeroed at allocation, so a report here is a kernel
 # reading scratch it did not fill).
 set -uo pipefail
+# Line tables in the kernels, so that a report names the generated code's source lines.
+export WARP_LANG_LINEINFO=${WARP_LANG_LINEINFO:-1}
 bins=${1:?usage: tests/gpu_sanitize.sh BIN_DIR [FILTER] [TOOLS]}
 filter=${2:-}
 tools=${3:-memcheck racecheck initcheck}

@@ -13,6 +13,7 @@ backend_tests!(
     dim_forms,
     repeated_launches,
     no_parameters,
+    more_threads_than_a_gpu_grid_holds,
     print_from_kernel,
     ahead_of_time_compile,
     ahead_of_time_adjoints,
@@ -511,6 +512,28 @@ fn k_noop() {
 
 fn no_parameters(dev: &wp::Device) {
     wp::launch(k_noop, 5, (), dev).unwrap();
+}
+
+/// A GPU runs one thread per element, in at most `i32::MAX` blocks (the entry has no
+/// grid-stride loop): a launch that would need more is an error naming the kernel and the
+/// count, before anything runs. 2^42 threads is over the limit at every block size (at most
+/// 1024 threads a block: 2^41 threads); the CPU has no such limit, and 2^42 threads would take
+/// it a while, so this is checked on GPUs only.
+fn more_threads_than_a_gpu_grid_holds(dev: &wp::Device) {
+    if dev.is_cpu() {
+        return;
+    }
+    let n = 1usize << 42;
+    let e = wp::launch(k_noop, n, (), dev).unwrap_err();
+    let msg = e.to_string();
+    assert!(
+        matches!(e, wp::Error::InvalidDim { .. })
+            && msg.contains("k_noop")
+            && msg.contains(&n.to_string()),
+        "{msg}"
+    );
+    // A launch within the limit runs.
+    wp::launch(k_noop, 1usize << 20, (), dev).unwrap();
 }
 
 #[wp::kernel]

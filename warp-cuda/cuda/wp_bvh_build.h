@@ -391,6 +391,10 @@ extern "C" __global__ void wp_lbvh_refit(wp::lbvh_refit_t s) {
     __stcg(&nodes[2 * leaf], make_float4(l.x, l.y, l.z, __int_as_float(~(wp::i32)k)));
     __stcg(&nodes[2 * leaf + 1], make_float4(h.x, h.y, h.z, __int_as_float((wp::i32)k + 1)));
     wp::i32 c = parents[leaf];
+    // The box this thread wrote last (node `prev`'s), kept in registers: a second arrival
+    // reads only the sibling's box from L2, two 16-byte words instead of four.
+    wp::i64 prev = leaf;
+    float3 mine_l = make_float3(l.x, l.y, l.z), mine_u = make_float3(h.x, h.y, h.z);
     while (c >= 0) {
       // Arrive with a release-acquire increment (lbvh_arrive): this subtree's boxes (and
       // checks) are published before it, and the second arrival reads both children after it.
@@ -412,13 +416,21 @@ extern "C" __global__ void wp_lbvh_refit(wp::lbvh_refit_t s) {
           bu = make_float3(fmaxf(bu.x, hi[q].x), fmaxf(bu.y, hi[q].y), fmaxf(bu.z, hi[q].z));
         }
       } else {
-        const float4 l0 = __ldcg(&nodes[2 * left]), l1 = __ldcg(&nodes[2 * left + 1]);
-        const float4 r0 = __ldcg(&nodes[2 * right]), r1 = __ldcg(&nodes[2 * right + 1]);
+        // Left operand first, as before (fminf of zeros of both signs may depend on order).
+        const bool came_left = (wp::i64)left == prev;
+        const wp::i32 sib = came_left ? right : left;
+        const float4 s0 = __ldcg(&nodes[2 * sib]), s1 = __ldcg(&nodes[2 * sib + 1]);
+        const float3 sl = make_float3(s0.x, s0.y, s0.z), su = make_float3(s1.x, s1.y, s1.z);
+        const float3 l0 = came_left ? mine_l : sl, r0 = came_left ? sl : mine_l;
+        const float3 l1 = came_left ? mine_u : su, r1 = came_left ? su : mine_u;
         bl = make_float3(fminf(l0.x, r0.x), fminf(l0.y, r0.y), fminf(l0.z, r0.z));
         bu = make_float3(fmaxf(l1.x, r1.x), fmaxf(l1.y, r1.y), fmaxf(l1.z, r1.z));
       }
       __stcg(&nodes[2 * c], make_float4(bl.x, bl.y, bl.z, a.w));
       __stcg(&nodes[2 * c + 1], make_float4(bu.x, bu.y, bu.z, b.w));
+      mine_l = bl;
+      mine_u = bu;
+      prev = c;
       c = parents[c];
     }
     // Past the root (c < 0, not a first arrival's break): this thread wrote the root, after

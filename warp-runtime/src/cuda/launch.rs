@@ -190,9 +190,26 @@ impl<K: Kernel> Prepared<K> {
                     })?;
                 (bd as u32, blocks)
             }
+            // One thread per element: the entry has no grid-stride loop (it cost 0.13 us a
+            // kernel in graph replays), so the grid must cover the launch.
             None => {
                 let block = config::cuda_block_dim();
-                let blocks = grid.total.div_ceil(block as usize).min(i32::MAX as usize) as u32;
+                let blocks = grid.total.div_ceil(block as usize);
+                let blocks = u32::try_from(blocks)
+                    .ok()
+                    .filter(|b| *b <= i32::MAX as u32)
+                    .ok_or_else(|| Error::InvalidDim {
+                        kernel: info.name,
+                        dim: grid.dims[..grid.ndim].to_vec(),
+                        reason: format!(
+                            "a launch on a GPU runs one thread per element, in at most {} \
+                             blocks of {block} threads (`wp::config::set_cuda_block_dim`): at most {} \
+                             threads, not {}",
+                            i32::MAX,
+                            i32::MAX as u64 * block as u64,
+                            grid.total
+                        ),
+                    })?;
                 (block, blocks)
             }
         };

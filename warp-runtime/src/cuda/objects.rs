@@ -57,7 +57,7 @@ fn program(lib: &ObjectLibrary) -> warp_cuda::Result<Program> {
 fn with_options<R>(p: &Program, f: impl FnOnce(&CompileOptions) -> R) -> R {
     f(&CompileOptions {
         fmad: p.row.exact.fmad(config::cuda_fmad()),
-        line_info: true,
+        line_info: config::cuda_line_info(),
         headers: &p.row.standalone_headers(),
         extra_options: p.row.exact.extra_options(),
         ..Default::default()

@@ -54,7 +54,7 @@ pub(crate) fn with_compile_options<R>(
     // variants on an H100: 1.34 s of NVRTC against 0.90 s without; they are not used.)
     f(&CompileOptions {
         fmad: exact.fmad(config::cuda_fmad()),
-        line_info: true,
+        line_info: config::cuda_line_info(),
         defines,
         headers: &headers,
         extra_options: exact.extra_options(),
@@ -125,6 +125,26 @@ mod tests {
         };
         assert_ne!(key(Some(tile(64))), key(Some(tile(128))));
         assert_ne!(key(None), key(Some(tile(64))));
+    }
+
+    /// `-lineinfo` follows `config::set_cuda_line_info`, and the setting is part of the cache
+    /// keys (a cubin built with line tables is not found without them). Restores the setting.
+    #[test]
+    fn line_tables_follow_the_setting_and_are_keyed() {
+        let before = config::cuda_line_info();
+        let at = |on: bool| {
+            config::set_cuda_line_info(on);
+            with_compile_options(true, None, Exact::No, None, |o| {
+                let args = o.nvrtc_args(90);
+                let key = warp_cuda::aot_key("extern \"C\" __global__ void k() {}", "k", o, 90);
+                (args.iter().any(|a| a == "-lineinfo"), key)
+            })
+        };
+        let (off, key_off) = at(false);
+        let (on, key_on) = at(true);
+        config::set_cuda_line_info(before);
+        assert!(!off && on);
+        assert_ne!(key_off, key_on);
     }
 
     /// A unit's headers decide its rounding through their sections' rows (the rows' own

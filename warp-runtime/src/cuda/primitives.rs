@@ -64,7 +64,7 @@ pub(crate) fn with_options<R>(module: &Module, f: impl FnOnce(&CompileOptions) -
     let defines: Vec<(&str, &str)> = defines.iter().map(|(k, v)| (*k, v.as_str())).collect();
     f(&CompileOptions {
         fmad: PRIMITIVES.exact.fmad(config::cuda_fmad()),
-        line_info: true,
+        line_info: config::cuda_line_info(),
         defines: &defines,
         headers: &PRIMITIVES.standalone_headers(),
         extra_options: PRIMITIVES.exact.extra_options(),
