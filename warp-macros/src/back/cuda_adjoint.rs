@@ -259,8 +259,12 @@ impl<'a> Printer<'a> {
         Ok(self.e.out)
     }
 
-    /// `@@ENTRY@@_adj`: one thread per element of the launch (as the forward entry), with an
-    /// empty stack in per-thread local memory.
+    /// `@@ENTRY@@_adj`: the grid-stride loop over threads, each with an empty stack in
+    /// per-thread local memory. (The forward entry runs one thread per element instead. The
+    /// same `if` here gave wrong gradients on an H200: the suite's `lerp_overloads_gradients`,
+    /// whose adjoint pushes spatial matrices, failed on CUDA alone, with and without line
+    /// tables, where the loop passes; the cause is not found. The loop's 0.1 us matters little
+    /// to an adjoint launch.)
     fn entry(&mut self) -> Result<(), String> {
         if self.f().tiled.is_some() {
             return self.tile_entry();
@@ -299,12 +303,11 @@ impl<'a> Printer<'a> {
             "#ifdef __CUDACC__\nextern \"C\" __global__ void @@ENTRY@@_adj({}) {{\n    \
              char __buf[{bytes} > 0 ? {bytes} : 1];\n    \
              wp::adstack_t __st = wp::adstack_new(__buf, {bytes});\n    \
-             {}\n    \
-             if (__flat < __launch.total) {{\n        \
+             const wp::i64 __stride = (wp::i64)blockDim.x * gridDim.x;\n    \
+             for (wp::i64 __flat = (wp::i64)blockIdx.x * blockDim.x + threadIdx.x; __flat < __launch.total; __flat += __stride) {{\n        \
              __st.top = 0;\n        {}\n        \
              {begin}@@SELF@@_adj({});{end}\n    }}\n}}\n#endif\n",
             decl.join(", "),
-            super::cuda::ENTRY_FLAT,
             super::cuda::THREAD_CTX,
             call.join(", ")
         );
