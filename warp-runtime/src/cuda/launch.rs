@@ -174,45 +174,38 @@ impl<K: Kernel> Prepared<K> {
             // block `blockIdx.x` and nothing else, which keeps the compiler from hoisting the
             // tile code's address arithmetic into registers across a grid-stride loop (96
             // registers a thread against 64 for the batched Cholesky).
-            Some(bd) => {
-                let blocks = u32::try_from(grid.total)
-                    .ok()
-                    .filter(|b| *b <= i32::MAX as u32)
-                    .ok_or_else(|| Error::InvalidDim {
-                        kernel: info.name,
-                        dim: grid.dims[..grid.ndim].to_vec(),
-                        reason: format!(
-                            "a tiled launch on a GPU runs one CUDA block per block: at most {} \
-                             blocks, not {}",
-                            i32::MAX,
-                            grid.total
-                        ),
-                    })?;
-                (bd as u32, blocks)
-            }
-            // One thread per element: the entry has no grid-stride loop (it cost 0.13 us a
-            // kernel in graph replays), so the grid must cover the launch.
+            Some(bd) => (bd as u32, grid.total),
+            // One thread per element: the forward entry has no grid-stride loop (it cost 0.13
+            // us a kernel in graph replays), so the grid must cover the launch.
             None => {
                 let block = config::cuda_block_dim();
-                let blocks = grid.total.div_ceil(block as usize);
-                let blocks = u32::try_from(blocks)
-                    .ok()
-                    .filter(|b| *b <= i32::MAX as u32)
-                    .ok_or_else(|| Error::InvalidDim {
-                        kernel: info.name,
-                        dim: grid.dims[..grid.ndim].to_vec(),
-                        reason: format!(
-                            "a launch on a GPU runs one thread per element, in at most {} \
-                             blocks of {block} threads (`wp::config::set_cuda_block_dim`): at most {} \
-                             threads, not {}",
-                            i32::MAX,
-                            i32::MAX as u64 * block as u64,
-                            grid.total
-                        ),
-                    })?;
-                (block, blocks)
+                (block, grid.total.div_ceil(block as usize))
             }
         };
+        // CUDA's grid holds at most `i32::MAX` blocks (the CPU has no such limit).
+        let blocks = u32::try_from(blocks)
+            .ok()
+            .filter(|b| *b <= i32::MAX as u32)
+            .ok_or_else(|| Error::InvalidDim {
+                kernel: info.name,
+                dim: grid.dims[..grid.ndim].to_vec(),
+                reason: match tile_block {
+                    Some(_) => format!(
+                        "a tiled launch on a GPU runs one CUDA block per block: at most {} \
+                         blocks, not {}",
+                        i32::MAX,
+                        grid.total
+                    ),
+                    None => format!(
+                        "a launch on a GPU runs one thread per element, in at most {} blocks \
+                         of {block} threads (`wp::config::set_cuda_block_dim`): at most {} \
+                         threads, not {}",
+                        i32::MAX,
+                        i32::MAX as u64 * block as u64,
+                        grid.total
+                    ),
+                },
+            })?;
         // (`loaded` checked it against the device and opted in above 48 KiB; it fits u32.)
         let shared_bytes = kernel.shared_bytes as u32;
         let prepared = Prepared {
