@@ -44,18 +44,26 @@ fn main() -> wp::Result<()> {
     let start = Instant::now();
     let cli = Cli::parse();
     let dev = cli.device.get()?;
+    // The wall time of the up-front load (its units may compile side by side, so the sum of
+    // their times is not it).
+    let mut load_wall_ms = None;
     if cli.load {
         let kernels = [
             wp::kernel_info(seed),
             wp::kernel_info(step),
             wp::kernel_info(sum_sq),
         ];
+        let t = Instant::now();
         wp::load_with_adjoints(&kernels, &dev)?;
+        load_wall_ms = Some(t.elapsed().as_secs_f64() * 1e3);
     }
 
     // 1. The seed function.
     let (f, g) = seed_ad::first_result(&dev)?;
-    let line = seed_ad::cold_start_line(start, &dev, g);
+    let mut line = seed_ad::cold_start_line(start, &dev, g);
+    if let Some(ms) = load_wall_ms {
+        line.push_str(&format!(" load_wall_ms={ms:.1}"));
+    }
     println!(
         "first result after {:.0} ms (from the start of main)",
         start.elapsed().as_secs_f64() * 1e3
