@@ -269,18 +269,10 @@ fn main() {
         // A first start after the machine booted also reads libnvrtc and the driver's
         // libraries from disk (250-450 ms more on the H200 machines): shown apart, so the
         // medians are of starts that find them in the OS's cache, as later runs do.
-        let first = start(bin, &small, &fresh("autodiff-first".into()));
-        if let Ok(s) = &first {
-            println!(
-                "  {:<44} {:8.1} {:8.1} {:10.2} {:8.1}   (the process's files possibly not \
-                 yet in the OS's cache; not in the medians)",
-                "autodiff example, first start, cold",
-                s.first_ms,
-                s.spawn_ms,
-                s.loading_ms,
-                s.nvrtc_ms
-            );
-        }
+        print_case(
+            "autodiff example, first start alone, cold",
+            &start(bin, &small, &fresh("autodiff-first".into())),
+        );
         let cold_dir = |k: usize| fresh(format!("autodiff-cold-{k}"));
         example_cold = print_case("autodiff example, cold", &case(bin, &small, reps, cold_dir));
         // The cache the last cold start filled.
@@ -292,7 +284,7 @@ fn main() {
         let load = ["--n", "1000", "--steps", "2", "--load"];
         let r = case(bin, &load, reps, |k| fresh(format!("autodiff-load-{k}")));
         example_load = print_case("autodiff example --load (six variants), cold", &r);
-        if let Some(s) = &example_load {
+        if let Some(s) = example_load.as_ref().filter(|s| s.load_wall_ms.is_finite()) {
             println!(
                 "  {:<44} the load's wall time {:.1} ms (the loading column sums each \
                  variant's wait)",
