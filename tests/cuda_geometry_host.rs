@@ -28,8 +28,8 @@ use std::process::Command;
 use warp_core::glam::{Vec3, Vec4};
 use warp_core::objects::bvh::{
     bvh_query_aabb, bvh_query_aabb_done, bvh_query_aabb_item, bvh_query_aabb_next, bvh_query_ray,
-    bvh_query_ray_done, bvh_query_ray_item, bvh_query_ray_next, BvhNode, BvhQueryAabb, BvhQueryRay,
-    BvhTree, BvhView,
+    bvh_query_ray_done, bvh_query_ray_item, bvh_query_ray_next, preorder_escapes, BvhNode,
+    BvhQueryAabb, BvhQueryRay, BvhTree, BvhView,
 };
 use warp_core::objects::geometry::{
     aabb_distance_sq, aabb_distance_sq_scaled, aabb_overlap, adj_closest_point_triangle,
@@ -106,8 +106,8 @@ static bvh_tree_t read_tree() {
     for (int k = 0; k < 3; ++k) nodes[i].upper[k] = wf();
     nodes[i].right = wi();
   }
-  parents.resize(nn);
-  for (i32 i = 0; i < nn; ++i) parents[i] = wi();
+  parents.resize(2 * (size_t)nn);  // the links: parents, then escapes
+  for (i32 i = 0; i < 2 * nn; ++i) parents[i] = wi();
   const i32 np = wi();
   prim_ids.resize(np);
   for (i32 i = 0; i < np; ++i) prim_ids[i] = wi();
@@ -945,14 +945,25 @@ fn bvh_cases(c: &mut Cases) {
     let internal = t.nodes.iter().rposition(|n| !n.is_leaf()).unwrap();
     t.nodes[internal].left = 0;
     bad.push(t);
+    // Links: every parent the root, every escape the root, the last node escaping to
+    // itself, an escape outside the nodes.
+    let nn = base.nodes.len();
     let mut t = base.clone();
-    for p in t.parents.iter_mut().skip(1) {
+    for p in t.parents[..nn].iter_mut().skip(1) {
         *p = 0;
     }
     bad.push(t);
     let mut t = base.clone();
-    let last = t.parents.len() - 1;
-    t.parents[last] = last as i32;
+    for e in t.parents[nn..].iter_mut() {
+        *e = 0;
+    }
+    bad.push(t);
+    let mut t = base.clone();
+    t.parents[2 * nn - 1] = nn as i32 - 1;
+    bad.push(t);
+    let mut t = base.clone();
+    let leaf = t.nodes.iter().position(|n| n.is_leaf()).unwrap();
+    t.parents[nn + leaf] = 10_000;
     bad.push(t);
     let mut t = base.clone();
     let root = t.nodes[0];
@@ -998,6 +1009,7 @@ fn caterpillar(lo: &[Vec3], hi: &[Vec3]) -> Tree {
             parents.push(2 * k as i32 - 2);
         }
     }
+    parents.extend(preorder_escapes(&nodes));
     Tree {
         nodes,
         parents,

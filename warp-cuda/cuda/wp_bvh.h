@@ -1,7 +1,7 @@
 // wp_bvh.h: section "bvh" of the builtin table: NVIDIA Warp's BVH queries, the CUDA mirror of
 // warp-core/src/objects/bvh.rs (read that for the node layout, the stackless traversal by
-// parent links of the box and ray loops, the ordered walk's 32-entry ring with the climb as
-// its overflow path, the move budget and the corrupt-tree rules). Every step below is the Rust
+// escape links of the box and ray loops, the ordered walk's 32-entry ring with the climb by
+// parent links as its overflow path, the move budget and the corrupt-tree rules). Every step below is the Rust
 // one in the same order: both backends visit the same nodes and yield the same primitives in
 // the same order, fault on the same read with the same index, and end at the same move.
 //
@@ -18,7 +18,7 @@
 //
 // Faults: every read whose index comes from buffer contents is checked and reported as an
 // out-of-bounds fault of the tree's parameter (`arg`), with Rust's index and shape: a node
-// or parent link outside [0, num_nodes), a prim_ids position or id outside [0, num_prims),
+// or parent link, or an escape (when its node is read), outside [0, num_nodes), a prim_ids position or id outside [0, num_prims),
 // a leaf end past num_prims (index end - 1). After a fault a function returns at once (the
 // CPU's `?`); the caller checks ctx->raised. No query runs longer than 2 * num_nodes + 2
 // moves, whatever the buffers hold.
@@ -28,7 +28,8 @@
 //
 //   bvh_t, 56 bytes:
 //      0 nodes      (const bvh_node_t*, num_nodes entries; the root is node 0)
-//      8 parents    (const i32*, num_nodes entries; -1 at the root)
+//      8 parents    (const i32*, 2 * num_nodes entries, the links: each node's parent, -1 at
+//                    the root, then each node's escape, -1 for none)
 //     16 prim_ids   (const i32*, num_prims entries)
 //     24 num_nodes  (i32, >= 1: the empty tree is one empty leaf)
 //     28 num_prims  (i32)
@@ -219,26 +220,19 @@ WP_LFN u32 bvh_max_steps(const bvh_tree_t& t) {
   return m < (i64)0xffffffffu ? (u32)m : 0xffffffffu;
 }
 
-/// BvhTree::climb: from finished node c to the right child of the nearest ancestor reached
-/// from its left child. Returns whether there is one (*out); false at the end (the root
-/// finished, the budget spent, a parent link that does not lead back) and on a fault.
-WP_LFN bool bvh_climb(const bvh_tree_t& t, i32 c, u32* steps, i32* out, ctx_t* ctx) {
-  for (;;) {
-    *steps += 1u;
-    if (*steps > bvh_max_steps(t)) return false;
-    const i32 p = bvh_parent<true>(t, c, ctx);
-    if (faulted(ctx)) return false;
-    if (p < 0) return false;
-    const bvh_node_t pn = bvh_node<true>(t, p, ctx);
-    if (faulted(ctx)) return false;
-    if (pn.left < 0) return false;
-    if (pn.left == c && pn.right != c) {
-      *out = pn.right;
-      return true;
-    }
-    if (pn.right != c) return false;
-    c = p;
-  }
+/// BvhTree::escape: the node a left-first traversal visits after node i's subtree (i a node the
+/// caller read), or false at the end (a negative escape). The escape is checked when its node
+/// is read.
+WP_LFN bool bvh_escape(const bvh_tree_t& t, i32 i, i32* out) {
+  if ((u32)i >= (u32)t.num_nodes) return false;  // not a node: never taken
+  const i32* at = t.parents + (i64)t.num_nodes + (i64)i;
+#if defined(__CUDACC__)
+  const i32 e = __ldg(at);
+#else
+  const i32 e = *at;
+#endif
+  *out = e;
+  return e >= 0;
 }
 
 /// Walk::next: advances w to the next primitive `prim_test(id, ctx)` accepts, in a leaf whose
@@ -267,10 +261,10 @@ WP_FN bvh_walk_t bvh_walk_next(bvh_walk_t w, const bvh_tree_t& t, NodeTest node_
     } else if (w.node == WP_BVH_WALK_END) {
       has = false;
     } else {
-      has = bvh_climb(t, w.node, &w.steps, &n, ctx);
-      if (faulted(ctx)) return w;
+      // The current leaf is finished: its escape.
+      has = bvh_escape(t, w.node, &n);
     }
-    // Down from n to the next accepted leaf, climbing past rejected subtrees.
+    // Down from n to the next accepted leaf, past rejected subtrees by their escapes.
     for (;;) {
       if (!has) {
         w.node = WP_BVH_WALK_END;
@@ -288,8 +282,7 @@ WP_FN bvh_walk_t bvh_walk_next(bvh_walk_t w, const bvh_tree_t& t, NodeTest node_
       if (faulted(ctx)) return w;
       if (!node_test(bvh_node_lower(node), bvh_node_upper(node))) {
         const i32 i = n;
-        has = bvh_climb(t, i, &w.steps, &n, ctx);
-        if (faulted(ctx)) return w;
+        has = bvh_escape(t, i, &n);
       } else if (node.left < 0) {
         i32 start, end;
         bvh_leaf_range<true>(t, node, &start, &end, ctx);

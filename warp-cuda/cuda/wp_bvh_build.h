@@ -5,8 +5,9 @@
 //
 // The tree is in the layout of warp-core/src/objects/bvh.rs (read its module docs): nodes of
 // 32 bytes {lower xyz, left, upper xyz, right}, the root at node 0, a leaf `left = ~start`
-// holding prim_ids[start, right), an internal node's children by index, `parents` with -1 at
-// the root. For n >= 2 primitives: internal node k is node k (k < n - 1, so the root is
+// holding prim_ids[start, right), an internal node's children by index, `parents` the links:
+// each node's parent (-1 at the root), then each node's escape (the node a left-first
+// traversal visits after its subtree, -1 for none). For n >= 2 primitives: internal node k is node k (k < n - 1, so the root is
 // internal node 0), the leaf of sorted primitive k is node n - 1 + k with one primitive; for
 // n = 1 the root is that leaf (node 0). The runtime writes the empty tree (n = 0) itself.
 //
@@ -18,8 +19,9 @@
 //                      orders (equal codes stay in index order)
 //   wp_lbvh_hierarchy  Karras's construction over the sorted codes, with the index breaking
 //                      ties (so duplicate codes still give a binary tree): every internal
-//                      node's children and their parent links, every leaf's range and
-//                      primitive; an internal node over at most leaf_size primitives is
+//                      node's children and their parent links, every node's escape (from
+//                      the codes, lbvh_escape), every leaf's range and primitive; an internal
+//                      node over at most leaf_size primitives is
 //                      written as a leaf of their range (the nodes under it stay, unreached)
 //   wp_lbvh_refit      each leaf's box, then up the parent links: the second thread to reach a
 //                      node (an atomic counter per node, incremented with release-acquire
@@ -73,7 +75,7 @@ struct lbvh_morton_t {
 };
 static_assert(sizeof(lbvh_morton_t) == 48, "lbvh_morton_t layout");
 
-/// LbvhHierarchy: the sorted keys and values (n each), nodes (2n - 1), parents (2n - 1),
+/// LbvhHierarchy: the sorted keys and values (n each), nodes (2n - 1), links (2 (2n - 1)),
 /// prim_ids (n), n, leaf_size (>= 1: an internal node over at most this many primitives is
 /// written as a leaf).
 struct lbvh_hierarchy_t {
@@ -235,19 +237,34 @@ WP_FN void lbvh_internal(const u32* keys, i64 n, i64 i, i64* first, i64* last, i
   *last = i < j ? j : i;
 }
 
+/// The escape of a node whose range of sorted positions ends at `last` (lbvh.rs' `escape`): the
+/// node starting at last + 1 that the internal node splitting after `last` has as its right
+/// child: internal node last + 1 when its range starts there (direction +1), else the leaf of
+/// last + 1; -1 after the last position.
+WP_FN i32 lbvh_escape(const u32* keys, i64 n, i64 last) {
+  const i64 j = last + 1;
+  if (j >= n) return -1;
+  if (j <= n - 2 && lbvh_delta(keys, n, j, j + 1) > lbvh_delta(keys, n, j, j - 1)) return (i32)j;
+  return (i32)(n - 1 + j);
+}
+
 /// Step k of the hierarchy: internal node k (k < n - 1) and the leaf of sorted position k. An
 /// internal node over at most leaf_size positions becomes a leaf of them; its children keep
 /// their parent links (the refit climbs through them) but no traversal reaches them.
 WP_FN void lbvh_hierarchy_step(const u32* keys, const u32* values, i64 n, i64 k,
                                i64 leaf_size, lbvh_node_t* nodes, i32* parents, i32* prim_ids) {
   const i64 leaf = n - 1 + k;
+  // The escapes follow the parents: node_count(n) links each.
+  i32* escapes = parents + (n >= 2 ? 2 * n - 1 : 1);
   nodes[leaf].left = ~(i32)k;
   nodes[leaf].right = (i32)(k + 1);
   prim_ids[k] = (i32)values[k];
+  escapes[leaf] = lbvh_escape(keys, n, k);
   if (k == 0) parents[0] = -1;
   if (k < n - 1) {
     i64 first, last, split;
     lbvh_internal(keys, n, k, &first, &last, &split);
+    escapes[k] = lbvh_escape(keys, n, last);
     const i64 left = split == first ? n - 1 + split : split;
     const i64 right = split + 1 == last ? n - 1 + split + 1 : split + 1;
     if (last - first + 1 <= leaf_size) {

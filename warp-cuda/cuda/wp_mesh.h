@@ -49,7 +49,7 @@
 //
 //   mesh_t, 80 bytes:
 //      0 nodes      (const bvh_node_t*)     -+
-//      8 parents    (const i32*)             |  a bvh_tree_t over the triangles (see wp_bvh.h):
+//      8 parents    (const i32*: links)      |  a bvh_tree_t over the triangles (see wp_bvh.h):
 //     16 prim_ids   (const i32*)             |  primitive ids are face indices;
 //     24 num_nodes  (i32, >= 1)              |  num_prims is the number of faces
 //     28 num_prims  (i32: faces)             |

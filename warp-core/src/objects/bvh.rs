@@ -18,38 +18,47 @@
 //!     (built with `min`/`max` only, so the containment is exact in floating point).
 //! - `prim_ids: [i32]`, `n` entries: the primitive indices (into the user's arrays) grouped
 //!   by leaf, a permutation of `0..n`.
-//! - `parents: [i32]`, one per node: the parent's index, **-1 for the root**. Refit walks it
-//!   bottom-up, and the traversals walk it up instead of keeping a stack (below).
+//! - `parents: [i32]`, **two per node** (the tree's links): first each node's parent, **-1
+//!   for the root**, then each node's *escape*, the node a left-first traversal visits after
+//!   the node's subtree: the right child of the nearest ancestor whose left subtree holds
+//!   the node, **-1 when there is none** (the root, and the last nodes of the traversal).
+//!   Refit walks the parents bottom-up; the iterating traversals follow the escapes instead
+//!   of keeping a stack (below). [`preorder_escapes`] computes the escapes from the nodes; the
+//!   GPU's linear BVH writes them in its hierarchy step, from the sorted codes.
 //!
 //! The **empty tree** (no primitive) is one leaf with the empty range (`left = !0 = -1`,
 //! `right = 0`) and the inverted box `lower = +inf`, `upper = -inf`, which no box test
-//! accepts; `prim_ids` is empty and `parents = [-1]`. A tree over one primitive is one leaf.
+//! accepts; `prim_ids` is empty and `parents = [-1, -1]`. A tree over one primitive is one
+//! leaf.
 //!
-//! # Traversal: by parent links, with a bounded stack where the state is local
+//! # Traversal: by escape links, with a bounded stack where the state is local
 //!
 //! Warp keeps a 32-entry stack of node indices in every query state (silently wrong when a
-//! deep tree overflows it). Here the iterating queries ([`bvh_query_aabb`], a mesh's box
-//! query) keep no stack: they go down to the left child first, and when a subtree is
-//! finished they climb the `parents` links until they arrive from a left child, then go to
-//! that node's right child. Their state is then a position in the tree, so it stays small
-//! ([`BvhQueryAabb`]: 44 bytes, pushed on the adjoint stack at every loop iteration), and
-//! any depth a builder produces (an LBVH over duplicate Morton codes included) is fine.
+//! deep tree overflows it). Here the iterating queries ([`bvh_query_aabb`], [`bvh_query_ray`],
+//! a mesh's box query) keep no stack: they go down to the left child first, and when a
+//! subtree is rejected or a leaf finished they go to its escape: one read of four bytes,
+//! where climbing the parent links to the first ancestor reached from its left child reads a
+//! parent link and a whole parent node per level climbed. Their
+//! state is then a position in the tree, so it stays small ([`BvhQueryAabb`]: 44 bytes,
+//! pushed on the adjoint stack at every loop iteration), and any depth a builder produces (an
+//! LBVH over duplicate Morton codes included) is fine.
 //!
 //! The searches that run to completion inside one call (closest point, closest hit, the
 //! faces around a vertex) order children by a key and keep the farther children on a local
 //! ring of `ORDERED_STACK` entries (`walk_ordered`): a pop instead of a climb that
 //! re-reads and re-orders every parent, which made those queries several times slower. A
-//! tree deeper than the ring loses its oldest entries, and the walk finds them by the same
-//! climb, so there is no overflow case either.
+//! tree deeper than the ring loses its oldest entries, and the walk finds them by climbing
+//! the parent links, so there is no overflow case either.
 //!
 //! # Corrupt trees
 //!
 //! Every read whose index comes from buffer contents is checked: an index outside its
-//! buffer (a child, a parent, a leaf range, a primitive id) is an out-of-bounds fault naming
-//! the tree's kernel parameter. A tree whose indices are in range but whose structure is
-//! wrong (a cycle, a parent link that does not match the children) cannot loop forever: a
-//! traversal takes at most `2 * nodes + 2` moves, which a well-formed tree never needs, and
-//! ends there; it also ends where a parent link does not lead back to its child.
+//! buffer (a child, a parent, an escape, a leaf range, a primitive id) is an out-of-bounds
+//! fault naming the tree's kernel parameter (an escape when the node it leads to is read). A
+//! tree whose indices are in range but whose structure is wrong (a cycle, links that do not
+//! match the children) cannot loop forever: a traversal takes at most `2 * nodes + 2` moves,
+//! which a well-formed tree never needs, and ends there; the ordered walk also ends where a
+//! parent link does not lead back to its child.
 
 // `!(x > t)` is true when `x` is NaN: the negated comparisons below are how NaN takes the
 // rejecting branch, on purpose.
@@ -153,8 +162,8 @@ fn contiguous_ptr<T: Copy>(v: &ArrayView<T, 1>, what: &str) -> *const T {
     p0
 }
 
-/// The part of a built BVH every query reads: the nodes, the parent links, the primitive
-/// order (module docs), and the kernel and parameter names its faults carry. `Copy`, owns
+/// The part of a built BVH every query reads: the nodes, the links (parents, then escapes),
+/// the primitive order (module docs), and the kernel and parameter names its faults carry. `Copy`, owns
 /// nothing; 64 bytes. A [`BvhView`] is one plus the primitives' boxes; a mesh view one plus
 /// its points and triangles.
 #[derive(Clone, Copy)]
@@ -185,8 +194,8 @@ impl std::fmt::Debug for BvhTree {
 }
 
 impl BvhTree {
-    /// A tree over raw buffers: `num_nodes` nodes and parent links, `num_prims` primitive ids;
-    /// faults carry `kernel` and `arg`.
+    /// A tree over raw buffers: `num_nodes` nodes, `2 * num_nodes` links (the parents, then
+    /// the escapes: module docs), `num_prims` primitive ids; faults carry `kernel` and `arg`.
     ///
     /// # Safety
     /// The pointers must address that many valid elements, alive and unchanged while the tree
@@ -223,14 +232,19 @@ impl BvhTree {
     /// A tree over checked views (each contiguous; the names of `nodes` are the faults').
     ///
     /// # Panics
-    /// When a view is not contiguous, `nodes` is empty, `parents` has another length than
-    /// `nodes`, or a length exceeds `i32::MAX` (host-side checks; the runtime's buffers pass).
+    /// When a view is not contiguous, `nodes` is empty, `parents` (the links: parents, then
+    /// escapes) has another length than twice `nodes`', or a length exceeds `i32::MAX`
+    /// (host-side checks; the runtime's buffers pass).
     pub fn new(
         nodes: ArrayView<BvhNode, 1>,
         parents: ArrayView<i32, 1>,
         prim_ids: ArrayView<i32, 1>,
     ) -> BvhTree {
-        assert_eq!(nodes.len(), parents.len(), "bvh: one parent link per node");
+        assert_eq!(
+            2 * nodes.len(),
+            parents.len(),
+            "bvh: a parent link and an escape per node"
+        );
         assert!(nodes.len() <= i32::MAX as usize && prim_ids.len() <= i32::MAX as usize);
         let (kernel, arg) = nodes.names();
         // SAFETY: views address their elements (ArrayView::new's contract), contiguous as
@@ -251,12 +265,12 @@ impl BvhTree {
     /// The empty tree (module docs), for adjoint placeholders.
     pub fn empty(kernel: &'static str, arg: &'static str) -> BvhTree {
         static NODE: BvhNode = BvhNode::EMPTY;
-        static PARENT: i32 = -1;
-        // SAFETY: one static node and parent link, no primitive.
+        static LINKS: [i32; 2] = [-1, -1];
+        // SAFETY: one static node, its parent link and escape, no primitive.
         unsafe {
             BvhTree::from_raw(
                 &NODE,
-                &PARENT,
+                LINKS.as_ptr(),
                 1,
                 std::ptr::NonNull::dangling().as_ptr(),
                 0,
@@ -323,6 +337,23 @@ impl BvhTree {
         }
     }
 
+    /// The node a left-first traversal visits after node `i`'s subtree (module docs), `None`
+    /// at the end (a negative escape). `i` is a node the caller read; the escape itself is
+    /// checked when its node is read.
+    #[inline(always)]
+    fn escape(&self, i: i32) -> Option<i32> {
+        if (i as u32) >= self.num_nodes as u32 {
+            return None; // not a node: callers pass nodes they read, so never taken
+        }
+        // SAFETY: i is a node, and the links hold 2 * num_nodes entries (from_raw's contract).
+        let e = unsafe {
+            self.parents
+                .add(self.num_nodes as usize + i as usize)
+                .read()
+        };
+        (e >= 0).then_some(e)
+    }
+
     /// The primitive at position `k` of `prim_ids`, or a fault when `k`, or the id read, is
     /// outside `0..num_prims`.
     #[inline(always)]
@@ -355,34 +386,32 @@ impl BvhTree {
     fn max_steps(&self) -> u32 {
         (2 * self.num_nodes as i64 + 2).min(u32::MAX as i64) as u32
     }
+}
 
-    /// Climbs from finished node `c` to the next node a left-first traversal visits: the right
-    /// child of the nearest ancestor reached from its left child. `None` at the end (the root
-    /// finished, the move budget spent, or a parent link that does not lead back).
-    #[inline(always)]
-    fn climb(&self, mut c: i32, steps: &mut u32) -> KResult<Option<i32>> {
-        loop {
-            *steps += 1;
-            if *steps > self.max_steps() {
-                return Ok(None);
-            }
-            let p = self.parent(c)?;
-            if p < 0 {
-                return Ok(None);
-            }
-            let pn = self.node(p)?;
-            if pn.is_leaf() {
-                return Ok(None);
-            }
-            if pn.left == c && pn.right != c {
-                return Ok(Some(pn.right));
-            }
-            if pn.right != c {
-                return Ok(None);
-            }
-            c = p;
+/// The escapes of a tree's nodes (module docs): for each node, the node a left-first traversal
+/// visits after its subtree, -1 for none. What every builder appends to its parent links.
+/// Nodes the traversal from the root never reaches (the children of an LBVH subtree made one
+/// leaf) get -1. A child index outside the nodes is skipped (a builder's trees have none).
+pub fn preorder_escapes(nodes: &[BvhNode]) -> Vec<i32> {
+    let mut escapes = vec![-1; nodes.len()];
+    // (node, its escape): a left child escapes to its right sibling, a right child where its
+    // parent does. At most one entry per node of a tree (each node has one parent), and the
+    // pushes are bounded by the nodes' count even for a corrupt one.
+    let mut todo = vec![(0usize, -1i32)];
+    let mut visited = 0usize;
+    while let Some((i, e)) = todo.pop() {
+        if i >= nodes.len() || visited == nodes.len() {
+            continue;
+        }
+        visited += 1;
+        escapes[i] = e;
+        let n = &nodes[i];
+        if !n.is_leaf() {
+            todo.push((n.right as usize, e));
+            todo.push((n.left as usize, n.right));
         }
     }
+    escapes
 }
 
 /// A built BVH as a kernel thread sees it: its [`BvhTree`] and the primitives' boxes (the
@@ -536,12 +565,13 @@ impl Walk {
                     return Ok(self);
                 }
             }
+            // The current leaf is finished: its escape (it was read, so it is a node).
             let mut n = match self.node {
                 Walk::START => Some(0),
                 Walk::END => None,
-                c => tree.climb(c, &mut self.steps)?,
+                c => tree.escape(c),
             };
-            // Down from `n` to the next accepted leaf, climbing past rejected subtrees.
+            // Down from `n` to the next accepted leaf, past rejected subtrees by their escapes.
             loop {
                 let Some(i) = n else {
                     self.node = Walk::END;
@@ -557,7 +587,7 @@ impl Walk {
                 }
                 let node = tree.node(i)?;
                 if !node_test(node.lower(), node.upper()) {
-                    n = tree.climb(i, &mut self.steps)?;
+                    n = tree.escape(i);
                 } else if node.is_leaf() {
                     let (start, end) = tree.leaf_range(&node)?;
                     self.node = i;
@@ -859,7 +889,14 @@ pub(crate) mod tests {
             } else {
                 b.build(0, lowers.len(), -1, leaf);
             }
+            b.parents.extend(preorder_escapes(&b.nodes));
             b
+        }
+
+        /// The escape links (the second half of `parents`).
+        pub fn escapes(&mut self) -> &mut [i32] {
+            let n = self.nodes.len();
+            &mut self.parents[n..]
         }
 
         fn build(&mut self, start: usize, end: usize, parent: i32, leaf: usize) -> i32 {
@@ -1080,6 +1117,7 @@ pub(crate) mod tests {
                 parents.push(2 * k as i32 - 2);
             }
         }
+        parents.extend(preorder_escapes(&nodes));
         Built {
             nodes,
             parents,
@@ -1218,9 +1256,10 @@ pub(crate) mod tests {
                 n += 1;
             }
         };
-        // A child out of range, a leaf range past the ids, a prim id out of range: faults.
+        // A child out of range, a leaf range past the ids, a prim id out of range: faults. (A
+        // left child is where the walk goes down; it reaches right children by escapes.)
         let mut b = Built::new(&lo, &hi, 1);
-        b.nodes[0].right = 10_000;
+        b.nodes[0].left = 10_000;
         let e = all(&mut b).unwrap_err();
         assert!(e.to_string().contains("argument `bvh`"), "{e}");
         let mut b = Built::new(&lo, &hi, 4);
@@ -1232,21 +1271,35 @@ pub(crate) mod tests {
         assert!(all(&mut b).is_err());
         b.prim_ids[3] = -1;
         assert!(all(&mut b).is_err());
-        // A cycle (a child pointing back to the root), a parent link leading astray, a
-        // self-parent: each ends.
+        // An escape outside the nodes: the fault of reading its node.
+        let mut b = Built::new(&lo, &hi, 1);
+        let first_leaf = b.nodes.iter().position(|n| n.is_leaf()).unwrap();
+        b.escapes()[first_leaf] = 10_000;
+        let e = all(&mut b).unwrap_err();
+        assert!(e.to_string().contains("argument `bvh`"), "{e}");
+        // A cycle (a child pointing back to the root), escapes all leading back to the root,
+        // a leaf escaping to itself: each ends within the move budget (2 * nodes + 2 moves,
+        // each entering one node, so at most nodes + 1 leaves and as many primitives).
+        let budget = 2 * (2 * 64 - 1) + 2;
         let mut b = Built::new(&lo, &hi, 1);
         let internal = b.nodes.iter().rposition(|n| !n.is_leaf()).unwrap();
         b.nodes[internal].left = 0;
-        assert!(all(&mut b).unwrap() <= 64 * 64);
+        assert!(all(&mut b).unwrap() <= budget);
         let mut b = Built::new(&lo, &hi, 1);
-        for p in b.parents.iter_mut().skip(1) {
+        for e in b.escapes().iter_mut() {
+            *e = 0;
+        }
+        assert!(all(&mut b).unwrap() <= budget);
+        let mut b = Built::new(&lo, &hi, 1);
+        let last_leaf = b.nodes.iter().rposition(|n| n.is_leaf()).unwrap();
+        b.escapes()[last_leaf] = last_leaf as i32;
+        assert!(all(&mut b).unwrap() <= budget);
+        // The parent links play no part in the iterating walk: all wrong, the same result.
+        let mut b = Built::new(&lo, &hi, 1);
+        for p in b.parents.iter_mut().take(b.nodes.len()).skip(1) {
             *p = 0;
         }
-        assert!(all(&mut b).unwrap() < 64);
-        let mut b = Built::new(&lo, &hi, 1);
-        let last = b.parents.len() - 1;
-        b.parents[last] = last as i32;
-        assert!(all(&mut b).unwrap() <= 64);
+        assert_eq!(all(&mut b).unwrap(), 64);
         // Every node a copy of the root: ends within the move budget.
         let mut b = Built::new(&lo, &hi, 1);
         let root = b.nodes[0];

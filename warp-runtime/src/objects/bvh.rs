@@ -150,7 +150,8 @@ impl RefitFrom<'_> {
 ///
 /// Built where its device is: on the CPU by the binned SAH builder (better trees, and the CPU
 /// has the cores for it), refit there in place; on a GPU as a linear BVH by the kernels of
-/// `wp_bvh_build.h` (`lbvh.rs`), which never leaves the GPU. `parents` and `prim_ids` never
+/// `wp_bvh_build.h` (`lbvh.rs`), which never leaves the GPU. `parents` (the links: each node's
+/// parent, then each node's escape, `2 * num_nodes` entries) and `prim_ids` never
 /// change after a build, so the copy a shared tree's refit makes shares them.
 pub(crate) struct Tree {
     /// The nodes on the device, two `Vec4`s (32 bytes, 16-aligned) per `BvhNode`.
@@ -234,10 +235,10 @@ impl Tree {
         let device = lowers.device();
         let n = lowers.len();
         let count = lbvh::node_count(n);
-        // The build writes every node, parent and id: no zeroing.
+        // The build writes every node, link and id: no zeroing.
         let tree = Tree {
             nodes: Array::empty(2 * count, device)?,
-            parents: Array::empty(count, device)?,
+            parents: Array::empty(2 * count, device)?,
             prim_ids: Array::empty(n, device)?,
             num_nodes: count,
             num_prims: n,
@@ -426,7 +427,7 @@ impl Tree {
             let (nodes, parents, ids) = unsafe {
                 (
                     std::slice::from_raw_parts_mut(nodes as *mut BvhNode, num_nodes),
-                    std::slice::from_raw_parts(parents as *const i32, num_nodes),
+                    std::slice::from_raw_parts(parents as *const i32, 2 * num_nodes),
                     std::slice::from_raw_parts(ids as *const i32, num_prims),
                 )
             };
@@ -589,7 +590,8 @@ impl Tree {
         self.num_nodes
     }
 
-    /// The tree on the host: nodes, parents, primitive ids (read back from the device).
+    /// The tree on the host: nodes, links (parents, then escapes), primitive ids (read back
+    /// from the device).
     pub(crate) fn host(&self) -> Result<(Vec<BvhNode>, Vec<i32>, Vec<i32>)> {
         let words = self.nodes.to_vec()?;
         Ok((

@@ -1,7 +1,8 @@
 //! The CPU BVH builder: a binned SAH build (rayon over the top of the tree and its binning)
 //! and a bottom-up refit, producing the node layout of `warp_core::objects::bvh` (root at
-//! node 0, leaves `left = !start`, `prim_ids` grouped by leaf, `parents` with -1 at the root),
-//! which every query on either backend reads.
+//! node 0, leaves `left = !start`, `prim_ids` grouped by leaf, `parents` the links: each
+//! node's parent, -1 at the root, then each node's escape), which every query on either
+//! backend reads.
 //!
 //! # The build
 //!
@@ -26,7 +27,7 @@
 //! # Leaf size
 //!
 //! At most [`MAX_LEAF_SIZE`] = 4 primitives, the SAH deciding below that. A leaf is the end of
-//! a traversal's descent and the start of its climb (the traversal is stackless, see
+//! a traversal's descent and the start of its escape (the traversal is stackless, see
 //! `warp_core::objects::bvh`), so leaves of 2 to 4 primitives halve the nodes visited compared
 //! to single-primitive leaves, while a leaf's primitives still fit in one or two cache lines of
 //! `prim_ids` and cost a handful of box or triangle tests. Larger leaves would make every
@@ -35,7 +36,7 @@
 use glam::{DVec3, Vec3, Vec4};
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicU32, Ordering};
-use warp_core::objects::bvh::BvhNode;
+use warp_core::objects::bvh::{preorder_escapes, BvhNode};
 
 /// The most primitives in a leaf.
 pub const MAX_LEAF_SIZE: usize = 4;
@@ -51,7 +52,8 @@ pub const PARALLEL_RANGE: usize = 4096;
 pub struct BuiltBvh {
     /// The nodes; the root is node 0.
     pub nodes: Vec<BvhNode>,
-    /// Each node's parent, -1 for the root.
+    /// The links, two per node: each node's parent (-1 for the root), then each node's escape
+    /// (`warp_core::objects::bvh::preorder_escapes`).
     pub parents: Vec<i32>,
     /// The primitive indices grouped by leaf.
     pub prim_ids: Vec<i32>,
@@ -62,7 +64,7 @@ impl BuiltBvh {
     pub fn empty() -> BuiltBvh {
         BuiltBvh {
             nodes: vec![BvhNode::EMPTY],
-            parents: vec![-1],
+            parents: vec![-1, -1],
             prim_ids: Vec::new(),
         }
     }
@@ -472,6 +474,7 @@ pub fn build_sah(lowers: &[Vec3], uppers: &[Vec3]) -> BuiltBvh {
             }
         }
     }
+    parents.extend(preorder_escapes(&nodes));
     BuiltBvh {
         nodes,
         parents,
@@ -543,6 +546,8 @@ impl NodesPtr {
 /// thread climbs the parent links, and the second thread to arrive at a node (an atomic
 /// counter per node) computes its box from its children's and climbs on, as Warp's refit.
 ///
+/// `parents`: the tree's links (the parents, then the escapes, which a refit does not read).
+///
 /// # Panics
 /// When the buffers are inconsistent (a child, parent or primitive index out of range, a
 /// parent link not matching the children): the runtime's own trees never are.
@@ -568,7 +573,12 @@ pub fn refit_from(
     uppers: &[Vec3],
     starts: impl IntoParallelIterator<Item = usize>,
 ) {
-    assert_eq!(nodes.len(), parents.len());
+    assert_eq!(
+        2 * nodes.len(),
+        parents.len(),
+        "a parent and an escape per node"
+    );
+    let parents = &parents[..nodes.len()];
     assert_eq!(lowers.len(), uppers.len());
     let arrivals: Vec<AtomicU32> = (0..nodes.len()).map(|_| AtomicU32::new(0)).collect();
     let ptr = NodesPtr(nodes.as_mut_ptr());
@@ -630,7 +640,8 @@ pub fn refit_from(
 
 /// Checks a tree against the layout (for builders' tests, the GPU LBVH's included): the root
 /// is node 0 with parent -1; every node is reached once from the root, or lies under a leaf
-/// (a linear BVH's subtree made one leaf, unreached); children's parent links lead back; leaf
+/// (a linear BVH's subtree made one leaf, unreached); children's parent links lead back; every
+/// reached node's escape is its left-first successor (`parents` holds the links); leaf
 /// ranges are in order and cover `prim_ids`, a permutation of `0..prims`; every box contains
 /// its children's (and a leaf's its primitives') exactly.
 /// Returns the tree's depth (the root alone is depth 1), or what is wrong.
@@ -641,9 +652,10 @@ pub fn check_layout(
     lowers: &[Vec3],
     uppers: &[Vec3],
 ) -> Result<usize, String> {
-    if nodes.is_empty() || parents.len() != nodes.len() {
-        return Err(format!("{} nodes, {} parents", nodes.len(), parents.len()));
+    if nodes.is_empty() || parents.len() != 2 * nodes.len() {
+        return Err(format!("{} nodes, {} links", nodes.len(), parents.len()));
     }
+    let (parents, escapes) = parents.split_at(nodes.len());
     if parents[0] != -1 {
         return Err(format!("root's parent {}", parents[0]));
     }
@@ -708,6 +720,10 @@ pub fn check_layout(
         if !(seen[c] && nodes[c].is_leaf()) {
             return Err(format!("node {i} unreachable, not under a leaf"));
         }
+    }
+    let want = preorder_escapes(nodes);
+    if let Some(i) = (0..nodes.len()).find(|&i| seen[i] && escapes[i] != want[i]) {
+        return Err(format!("node {i}: escape {} not {}", escapes[i], want[i]));
     }
     if let Some(k) = covered.iter().position(|c| *c != 1) {
         return Err(format!("prim_ids[{k}] in {} leaves", covered[k]));
@@ -948,7 +964,8 @@ mod tests {
         let m = b.nodes.len();
         let perm = |i: i32| if i == 0 { 0 } else { m as i32 - i };
         let mut nodes = vec![BvhNode::EMPTY; m];
-        let mut parents = vec![-1; m];
+        // The escapes (the second half) are not read by a refit.
+        let mut parents = vec![-1; 2 * m];
         for i in 0..m {
             let mut nd = b.nodes[i];
             if !nd.is_leaf() {

@@ -9,7 +9,8 @@
 //! checks the C++ offsets).
 //!
 //! The tree's buffers are in the layout of `warp_core::objects::bvh` (32-byte nodes, root at
-//! node 0, `parents` with -1 at the root, `prim_ids` grouped by leaf). Byte offsets (each
+//! node 0, `parents` the links: each node's parent, -1 at the root, then each node's escape,
+//! `prim_ids` grouped by leaf). Byte offsets (each
 //! asserted below, with the sizes):
 //!
 //! `CudaBvhTree` (`wp::bvh_tree_t`), 40 bytes:
@@ -17,7 +18,7 @@
 //! | offset | field | type |
 //! |---|---|---|
 //! | 0 | `nodes` | `u64` (device address of `num_nodes` `BvhNode`s, 32 bytes each, 16-aligned) |
-//! | 8 | `parents` | `u64` (`num_nodes` `i32`) |
+//! | 8 | `parents` | `u64` (`2 * num_nodes` `i32`: parents, then escapes) |
 //! | 16 | `prim_ids` | `u64` (`num_prims` `i32`) |
 //! | 24 | `num_nodes` | `i32` (at least 1) |
 //! | 28 | `num_prims` | `i32` |

@@ -45,7 +45,8 @@ pub(crate) fn node_count(n: usize) -> usize {
 }
 
 /// The tree's buffers (allocated by the caller on the build's device): `node_count(n)` nodes
-/// (as 8 words each) and parents, `n` primitive ids, and the refit's counters, one per node,
+/// (as 8 words each), twice as many links (`parents`: each node's parent, then each node's
+/// escape), `n` primitive ids, and the refit's counters, one per node,
 /// zero (`Array::zeros`; a refit leaves them zero).
 pub(crate) struct LbvhTree<'a> {
     pub nodes: &'a Array<i32>,
@@ -116,10 +117,11 @@ impl Lbvh {
             tree.nodes
                 .view(0..8)?
                 .copy_from(&Array::from_slice(&empty, &self.device)?)?;
+            // The root's parent and escape.
             return tree
                 .parents
-                .view(0..1)?
-                .copy_from(&Array::from_slice(&[-1], &self.device)?);
+                .view(0..2)?
+                .copy_from(&Array::from_slice(&[-1, -1], &self.device)?);
         }
         // Every element is written before it is read (keys and values by the codes' step):
         // no zeroing here.
@@ -217,7 +219,8 @@ static NO_NAMES: KernelInfo = KernelInfo {
     ..KernelInfo::BLANK
 };
 
-/// The tree as host vectors: nodes (8 words each), parents, primitive ids.
+/// The tree as host vectors: nodes (8 words each), links (parents, then escapes), primitive
+/// ids.
 pub type HostTree = (Vec<[i32; 8]>, Vec<i32>, Vec<i32>);
 
 /// Builds a linear BVH over `lowers`/`uppers` on their device, then (when `moved` is given)
@@ -233,7 +236,7 @@ pub fn build_for_tests(
     let dev = lowers.device().clone();
     let n = lowers.len();
     let nodes = Array::<i32>::zeros(8 * node_count(n), &dev)?;
-    let parents = Array::<i32>::zeros(node_count(n), &dev)?;
+    let parents = Array::<i32>::zeros(2 * node_count(n), &dev)?;
     let prim_ids = Array::<i32>::zeros(n, &dev)?;
     let counters = Array::<i32>::zeros(node_count(n), &dev)?;
     let tree = LbvhTree {
@@ -570,6 +573,24 @@ fn delta(keys: &[u32], i: i64, j: i64) -> i32 {
     (a ^ b).leading_zeros() as i32
 }
 
+/// The escape of a node whose range of sorted positions ends at `last` (`wp::lbvh_escape`):
+/// the node a left-first traversal visits after it, which starts at position `last + 1` and is
+/// the right child of the internal node that splits after `last`. That child is internal node
+/// `last + 1` when that node's range starts there (Karras's direction +1: a right child is
+/// numbered by its first position, a left child by its last), else the leaf of `last + 1`.
+/// -1 after the last position. Two prefix lengths, no search: each step writes its nodes'.
+fn escape(keys: &[u32], last: i64) -> i32 {
+    let n = keys.len() as i64;
+    let j = last + 1;
+    if j >= n {
+        -1
+    } else if j <= n - 2 && delta(keys, j, j + 1) > delta(keys, j, j - 1) {
+        j as i32
+    } else {
+        (n - 1 + j) as i32
+    }
+}
+
 /// Internal node `i`'s range `[first, last]` and split (`wp::lbvh_internal`).
 fn internal(keys: &[u32], i: i64) -> (i64, i64, i64) {
     let d: i64 = if delta(keys, i, i + 1) > delta(keys, i, i - 1) {
@@ -712,7 +733,8 @@ unsafe impl ObjectStep for LbvhHierarchy {
     }
     fn run_cpu(&self) -> Result<()> {
         let n = self.len();
-        // SAFETY: `n` sorted keys and values; `node_count(n)` nodes and parents, `n` ids.
+        // SAFETY: `n` sorted keys and values; `node_count(n)` nodes, twice as many links, `n`
+        // ids.
         let (keys, values) = unsafe {
             (
                 std::slice::from_raw_parts(self.keys as *const u32, n),
@@ -723,22 +745,26 @@ unsafe impl ObjectStep for LbvhHierarchy {
         let parents = Shared(self.parents as *mut i32);
         let ids = Shared(self.prim_ids as *mut i32);
         let n64 = n as i64;
+        let escapes_at = node_count(n);
         (0..n).into_par_iter().with_min_len(1024).for_each(|k| {
             let (nodes, parents, ids) = (nodes, parents, ids);
             let leaf = n - 1 + k;
-            // SAFETY: step k writes leaf n - 1 + k, id k, internal node k and the parent
-            // links of internal node k's two children: every node has one parent, so no two
-            // steps write one element (and parents[0], the root's, only step 0).
+            // SAFETY: step k writes leaf n - 1 + k, id k, internal node k, the parent links of
+            // internal node k's two children and the escapes of internal node k and leaf
+            // n - 1 + k: every node has one parent, so no two steps write one element (and
+            // parents[0], the root's, only step 0).
             unsafe {
                 let l = &mut *nodes.at(leaf);
                 l.left = !(k as i32);
                 l.right = k as i32 + 1;
                 ids.at(k).write(values[k] as i32);
+                parents.at(escapes_at + leaf).write(escape(keys, k as i64));
                 if k == 0 {
                     parents.at(0).write(-1);
                 }
                 if k + 1 < n {
                     let (first, last, split) = internal(keys, k as i64);
+                    parents.at(escapes_at + k).write(escape(keys, last));
                     let left = if split == first {
                         n64 - 1 + split
                     } else {
@@ -776,12 +802,12 @@ unsafe impl ObjectStep for LbvhRefit {
     fn run_cpu(&self) -> Result<()> {
         let n = self.len();
         let count = node_count(n);
-        // SAFETY: `count` nodes and parents, `n` ids and boxes, all the caller's; the counters
+        // SAFETY: `count` nodes, twice as many links, `n` ids and boxes, all the caller's; the counters
         // are not needed on the CPU (`bvh_build::refit` keeps its own).
         let (nodes, parents, ids, lo, hi) = unsafe {
             (
                 std::slice::from_raw_parts_mut(self.nodes as *mut BvhNode, count),
-                std::slice::from_raw_parts(self.parents as *const i32, count),
+                std::slice::from_raw_parts(self.parents as *const i32, 2 * count),
                 std::slice::from_raw_parts(self.prim_ids as *const i32, n),
                 std::slice::from_raw_parts(self.lowers as *const Vec3, n),
                 std::slice::from_raw_parts(self.uppers as *const Vec3, n),
@@ -890,7 +916,7 @@ mod tests {
         let dev = crate::device::get_device("cpu").unwrap();
         let n = lo.len();
         let nodes = Array::<i32>::zeros(8 * node_count(n), &dev).unwrap();
-        let parents = Array::<i32>::zeros(node_count(n), &dev).unwrap();
+        let parents = Array::<i32>::zeros(2 * node_count(n), &dev).unwrap();
         let ids = Array::<i32>::zeros(n, &dev).unwrap();
         let counters = Array::<i32>::zeros(node_count(n), &dev).unwrap();
         let mut b = Lbvh::new(&dev).unwrap();
@@ -1002,7 +1028,7 @@ mod tests {
             let n = faces;
             let (lo, hi) = (a(&vec![Vec3::ZERO; n]), a(&vec![Vec3::ZERO; n]));
             let nodes = Array::<i32>::zeros(8 * node_count(n), &dev).unwrap();
-            let parents = Array::<i32>::zeros(node_count(n), &dev).unwrap();
+            let parents = Array::<i32>::zeros(2 * node_count(n), &dev).unwrap();
             let ids = Array::<i32>::zeros(n, &dev).unwrap();
             let counters = Array::<i32>::zeros(node_count(n), &dev).unwrap();
             let tree = LbvhTree {
@@ -1086,7 +1112,7 @@ mod tests {
             let n = faces;
             let (lo, hi) = (a(&vec![Vec3::ZERO; n]), a(&vec![Vec3::ZERO; n]));
             let nodes = Array::<i32>::zeros(8 * node_count(n), &dev).unwrap();
-            let parents = Array::<i32>::zeros(node_count(n), &dev).unwrap();
+            let parents = Array::<i32>::zeros(2 * node_count(n), &dev).unwrap();
             let ids = Array::<i32>::zeros(n, &dev).unwrap();
             let counters = Array::<i32>::zeros(node_count(n), &dev).unwrap();
             let tree = LbvhTree {
@@ -1222,7 +1248,7 @@ mod tests {
         let a = |v: &[Vec3]| Array::from_slice(v, &dev).unwrap();
         let (l, h) = (a(&lo), a(&hi));
         let nodes = Array::<i32>::zeros(8 * node_count(n), &dev).unwrap();
-        let parents = Array::<i32>::zeros(node_count(n), &dev).unwrap();
+        let parents = Array::<i32>::zeros(2 * node_count(n), &dev).unwrap();
         let ids = Array::<i32>::zeros(n, &dev).unwrap();
         let counters = Array::<i32>::zeros(node_count(n), &dev).unwrap();
         let tree = LbvhTree {
