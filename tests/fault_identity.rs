@@ -519,3 +519,51 @@ fn hash_grid_query_faults_on_a_corrupt_start() {
         assert_eq!(out.to_vec().unwrap(), [2]);
     });
 }
+
+/// A point id a kernel wrote into the grid after the build that is not a point index (past
+/// the points, or negative): the query yielding it faults as an out-of-bounds access of the
+/// grid's points at that id (the grid's parameter, index the id, shape the point count) on
+/// both backends, before the kernel's `x[j]` could read with it, and the query ends. Every
+/// candidate being a point index is what lets a query loop's `x[j]` skip its own check on a
+/// GPU once `x` holds as many elements as the grid has points.
+#[test]
+fn hash_grid_query_faults_on_a_corrupt_point_id() {
+    on_every_backend("hash_grid_query_faults_on_a_corrupt_point_id", |dev| {
+        let pts = [
+            Vec3::new(0.1, 0.1, 0.1),
+            Vec3::new(0.2, 0.1, 0.1),
+            Vec3::new(2.5, 2.5, 2.5),
+        ];
+        let x = Array::from_slice(&pts, dev).unwrap();
+        let mut grid = wp::HashGrid::new(4, 4, 4, dev).unwrap();
+        grid.build(&x, 1.0).unwrap();
+        let out = Array::<i32>::zeros(1, dev).unwrap();
+        let ids = grid.point_ids().unwrap();
+        // Bucket 0 holds positions 0 and 1 of the ids (points 0 and 1).
+        assert_eq!(&ids.to_vec().unwrap()[..2], &[0, 1]);
+        for bad in [7i32, 3, -3] {
+            wp::launch(k_set_index, 1, (&ids, 1usize, bad), dev).unwrap();
+            let r = wp::launch(k_count_near_first, 1, (&grid, &x, 0.5f32, &out), dev);
+            let launch = wp::last_launch_id().unwrap();
+            let f = fault(r.and_then(|()| wp::synchronize()));
+            assert_eq!(
+                f,
+                Fault {
+                    kernel: "k_count_near_first",
+                    kind: FaultKind::OutOfBounds {
+                        arg: "grid",
+                        index: vec![bad as i128],
+                        shape: vec![3],
+                    },
+                    launch: Some(launch),
+                },
+                "point id {bad}"
+            );
+        }
+        // Mended, the grid answers again.
+        wp::launch(k_set_index, 1, (&ids, 1usize, 1i32), dev).unwrap();
+        wp::launch(k_count_near_first, 1, (&grid, &x, 0.5f32, &out), dev).unwrap();
+        wp::synchronize().unwrap();
+        assert_eq!(out.to_vec().unwrap(), [2]);
+    });
+}

@@ -456,6 +456,9 @@ WP_LFN bool bvh_query_aabb_done(bvh_query_aabb_t q) { return q.walk.item < 0; }
 
 WP_LFN i32 bvh_query_aabb_item(bvh_query_aabb_t q) { return q.walk.item; }
 
+/// Every item a box or ray query yields is below this (bvh_prim checks each id).
+WP_LFN i64 bvh_item_bound(const bvh_t& bvh) { return (i64)bvh.tree.num_prims; }
+
 // ------------------------------------------------------------------------------------------
 // Ray query
 // ------------------------------------------------------------------------------------------

@@ -20,7 +20,8 @@
 // iteration (see warp-macros/src/front/lower/query.rs).
 //
 // Every point read is a checked `load` reporting the grid's parameter: a bad point_id index
-// is an out-of-bounds fault; bucket indices are below the bucket count by construction, and a
+// is an out-of-bounds fault, and so is a point id that is not a point index (negative, or
+// num_points or more: the fault's index is the id); bucket indices are below the bucket count by construction, and a
 // query ends after at most dim_x * dim_y * dim_z buckets whatever the buffers hold (after a fault the thread goes on with zero values, as everywhere on the
 // GPU, and still ends).
 #pragma once
@@ -142,8 +143,22 @@ WP_LFN hash_grid_query_t hash_grid_query_next(const hash_grid_t& grid, hash_grid
       // A checked read (a corrupt start below 0 faults here), which measured faster than a
       // plain read behind a check at the bucket's entry (0.83 against 0.96 ms for the
       // cell-order count of 1M points on an H100), unlike on the CPU.
-      q.point = load(ids, (i64)q.next, ctx);
+      const i32 id = load(ids, (i64)q.next, ctx);
       q.next += 1;
+      // Every candidate is a point index (hash_grid_item_bound): a corrupt id is the
+      // out-of-bounds fault of the grid's points at that index, and ends the query. So a
+      // kernel's accesses at the loop variable need no check of their own once the array
+      // holds num_points elements (the forward emitter's unswitched query loop).
+      if ((u32)id >= (u32)grid.num_points) {
+        ctx->raised = 1;
+        raise_out_of_bounds_1d(ctx->rec, grid.arg, (i64)id, (i64)grid.num_points);
+        q.at[2] = q.span[2];
+        q.next = 0;
+        q.end = 0;
+        q.point = -1;
+        return q;
+      }
+      q.point = id;
       return q;
     }
     // The next cell of the box, x fastest (an empty box has span[2] == 0: done at once).
@@ -178,6 +193,9 @@ WP_LFN hash_grid_query_t hash_grid_query_next(const hash_grid_t& grid, hash_grid
 WP_LFN bool hash_grid_query_done(hash_grid_query_t q) { return q.point < 0; }
 
 WP_LFN usize hash_grid_query_point(hash_grid_query_t q) { return (usize)(i64)q.point; }
+
+/// Every candidate a query yields is below this (hash_grid_query_next checks each).
+WP_LFN i64 hash_grid_item_bound(const hash_grid_t& grid) { return (i64)grid.num_points; }
 
 template <typename I>
 WP_FN usize hash_grid_point_id(const hash_grid_t& grid, I i, ctx_t* ctx) {

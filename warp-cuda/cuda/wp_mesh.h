@@ -684,6 +684,9 @@ WP_LFN bool mesh_query_aabb_done(mesh_query_aabb_t q) { return q.walk.item < 0; 
 
 WP_LFN i32 mesh_query_aabb_item(mesh_query_aabb_t q) { return q.walk.item; }
 
+/// Every face a box query yields is below this (bvh_prim checks each id).
+WP_LFN i64 mesh_item_bound(const mesh_t& mesh) { return (i64)mesh.tree.num_prims; }
+
 // ------------------------------------------------------------------------------------------
 // Evaluation at barycentrics
 // ------------------------------------------------------------------------------------------

@@ -142,6 +142,44 @@ pub fn loop_indexed_params(f: &Function, body: &Block, var: VarId) -> Vec<VarId>
     out
 }
 
+/// A `loop` that `front::lower::query` made of `for j in query(object, ..) { .. }` over a row
+/// whose items its `next` checks against a bound (`Iterate::bound`): the object, the loop
+/// variable `j` and the bound's CUDA function. Matched on the lowering's shape: the state's
+/// `next`, its `done` and the `break`, then the item. `None` for any other loop, for a
+/// mutable `j` or object (an assignment could move either), and for a loop without a
+/// variable.
+pub fn bounded_query_loop(f: &Function, body: &Block) -> Option<(VarId, VarId, &'static str)> {
+    let [first, _, _, item_stmt, ..] = body.as_slice() else {
+        return None;
+    };
+    let StmtKind::Assign {
+        op: Op::Builtin {
+            builtin: next,
+            args,
+        },
+        ..
+    } = &first.kind
+    else {
+        return None;
+    };
+    let it = crate::builtins::BUILTINS
+        .iter()
+        .filter_map(|b| b.iterate)
+        .find(|it| it.next == next.name)?;
+    let bound = it.bound?;
+    let StmtKind::Assign {
+        dst: j,
+        op: Op::Builtin { builtin: item, .. },
+        define: true,
+    } = &item_stmt.kind
+    else {
+        return None;
+    };
+    let object = *args.first()?;
+    (item.name == it.item && !f.vars[*j].mutable && !f.vars[object].mutable)
+        .then_some((object, *j, bound))
+}
+
 /// Whether `array` is an array of floats or float vectors (the array's element type: a
 /// value's type may be one the macro cannot see).
 pub fn float_elements(f: &Function, array: VarId) -> bool {

@@ -277,8 +277,14 @@ pub fn hash_grid_query_next(grid: HashGridView, mut q: HashGridQuery) -> KResult
         if q.next < q.end {
             // SAFETY: `0 <= next < end <= point count`: checked when the bucket was entered
             // below (states are made and changed only by these functions).
-            q.point = unsafe { grid.point_ids.load_unchecked(q.next as usize) };
+            let id = unsafe { grid.point_ids.load_unchecked(q.next as usize) };
             q.next += 1;
+            if (id as u32) >= grid.point_ids.len() as u32 {
+                // Not a point index: the out-of-bounds fault of the grid's points at the id
+                // (every candidate is one, which the CUDA emitter's query loops rely on).
+                grid.point_ids.load(id)?;
+            }
+            q.point = id;
             return Ok(q);
         }
         // The next cell of the box, x fastest (an empty box has span[2] == 0: done at once).

@@ -753,6 +753,46 @@ impl<'a> Emitter<'a> {
                 self.indent -= 1;
                 self.close();
             }
+            // A query loop whose items are below a bound of the object (`next` checks each):
+            // one check before the loop that each 1-D array parameter indexed by the loop
+            // variable holds that many elements covers all those accesses, as a native loop's
+            // range check does, and the loop is emitted twice in the same way. Forward only:
+            // the adjoint's replay keeps its single, checked copy.
+            StmtKind::Loop { body }
+                if !self.replay
+                    && crate::analysis::bounded_query_loop(self.f, body).is_some_and(
+                        |(_, j, _)| {
+                            !crate::analysis::loop_indexed_params(self.f, body, j).is_empty()
+                        },
+                    ) =>
+            {
+                let (object, j, bound) =
+                    crate::analysis::bounded_query_loop(self.f, body).expect("matched");
+                let arrays = crate::analysis::loop_indexed_params(self.f, body, j);
+                self.tmp += 1;
+                let flag = format!("__inb{}", self.tmp);
+                let n = format!("{bound}({})", self.var(object));
+                let conds: Vec<String> = arrays
+                    .iter()
+                    .map(|a| format!("wp::range_inside({}, (wp::i64)0, {n})", self.var(*a)))
+                    .collect();
+                self.line(sp, &format!("const bool {flag} = {};", conds.join(" && ")));
+                if self.unswitched >= MAX_UNSWITCH_DEPTH {
+                    return self.native_loop(sp, "for (;;) {", body, j, &arrays, &flag);
+                }
+                self.unswitched += 1;
+                self.line(sp, &format!("if ({flag}) {{"));
+                self.indent += 1;
+                let fast = self.native_loop(sp, "for (;;) {", body, j, &arrays, "");
+                self.indent -= 1;
+                self.line(sp, "} else {");
+                self.indent += 1;
+                let checked = self.native_loop(sp, "for (;;) {", body, j, &[], "");
+                self.indent -= 1;
+                self.unswitched -= 1;
+                fast.and(checked)?;
+                self.close();
+            }
             StmtKind::Loop { body } => {
                 self.line(sp, "for (;;) {");
                 self.nested(body)?;
@@ -1161,6 +1201,39 @@ mod tests {
             src.contains("? wp::load_unchecked(a_0, (wp::i64)(r_"),
             "{src}"
         );
+    }
+
+    #[test]
+    fn query_loops_with_checked_items_are_unswitched() {
+        let src = emit_kernel(parse_quote! {
+            fn k(grid: HashGrid, x: Array<Vec3>, m: Array<f32, 2>, out: Array<f32>, r: f32) {
+                let i = tid();
+                let mut s = 0.0;
+                for j in hash_grid_query(grid, x[i], r) {
+                    s += x[j].x + m[(j, 0)];
+                }
+                for mut j in hash_grid_query(grid, x[i], r) {
+                    j += 0;
+                    s += x[j].x;
+                }
+                out[i] = s;
+            }
+        });
+        let count = |needle: &str| src.matches(needle).count();
+        // One check that `x` holds as many elements as the grid has points (every candidate
+        // is below that: `hash_grid_query_next` checks each), then the loop without the check
+        // of `x[j]` and the loop with it; the 2-D `m` stays checked in both.
+        assert_eq!(
+            count("const bool __inb1 = wp::range_inside(x_1, (wp::i64)0, wp::hash_grid_item_bound(grid_0));"),
+            1,
+            "{src}"
+        );
+        assert_eq!(count("if (__inb1) {"), 1, "{src}");
+        assert_eq!(count("wp::load_unchecked(x_1, (wp::i64)(j_"), 1, "{src}");
+        assert!(!src.contains("wp::load_unchecked(m_2"), "{src}");
+        // A `mut` loop variable could leave the bound: that loop keeps its checks.
+        assert_eq!(count("wp::range_inside("), 1, "{src}");
+        assert_eq!(count("wp::load(x_1, (wp::i64)(j_"), 2, "{src}");
     }
 
     #[test]

@@ -15,6 +15,12 @@ pub struct Iterate {
     pub done: &'static str,
     /// `(state) -> item`: the candidate the loop variable takes.
     pub item: &'static str,
+    /// The CUDA function of the object (`wp::hash_grid_item_bound(grid)`) whose value every
+    /// item is below, with items never negative: `next` checks each item it yields (a fault,
+    /// and the end of the query, otherwise). Then one check before the loop that a 1-D array
+    /// holds that many elements covers every access of it at the loop variable (the forward
+    /// CUDA emitter's unswitched query loop). `None` when items are not checked so.
+    pub bound: Option<&'static str>,
 }
 
 /// How a builtin is differentiated in reverse mode (used by the adjoint transform; forward
@@ -263,7 +269,27 @@ impl Builtin {
         item: &'static str,
     ) -> Builtin {
         Builtin {
-            iterate: Some(Iterate { next, done, item }),
+            iterate: Some(Iterate {
+                next,
+                done,
+                item,
+                bound: None,
+            }),
+            ..self
+        }
+    }
+
+    /// The query's items are checked against `bound` of the object ([`Iterate::bound`]);
+    /// after [`iterate`](Builtin::iterate).
+    pub(super) const fn item_bound(self, bound: &'static str) -> Builtin {
+        let Some(it) = self.iterate else {
+            panic!("item_bound: not a query row");
+        };
+        Builtin {
+            iterate: Some(Iterate {
+                bound: Some(bound),
+                ..it
+            }),
             ..self
         }
     }
