@@ -144,7 +144,7 @@ pub fn loop_indexed_params(f: &Function, body: &Block, var: VarId) -> Vec<VarId>
 
 /// A `loop` that `front::lower::query` made of `for j in query(object, ..) { .. }` over a row
 /// whose items its `next` checks against a bound (`Iterate::bound`): the object, the loop
-/// variable `j` and the bound's function (a builtin name, without a path). Matched on the lowering's shape: the state's
+/// variable `j` and the bound's CUDA function. Matched on the lowering's shape: the state's
 /// `next`, its `done` and the `break`, then the item. `None` for any other loop, for a
 /// mutable `j` or object (an assignment could move either), and for a loop without a
 /// variable.

@@ -22,13 +22,13 @@ use crate::objects::{geometry, mesh, MeshView};
 use crate::KResult;
 
 pub use crate::objects::bvh::{
-    bvh_item_bound, bvh_query_aabb, bvh_query_aabb_done, bvh_query_aabb_item, bvh_query_aabb_next,
-    bvh_query_ray, bvh_query_ray_done, bvh_query_ray_item, bvh_query_ray_next,
+    bvh_query_aabb, bvh_query_aabb_done, bvh_query_aabb_item, bvh_query_aabb_next, bvh_query_ray,
+    bvh_query_ray_done, bvh_query_ray_item, bvh_query_ray_next,
 };
 pub use crate::objects::geometry::intersect_tri_tri;
 pub use crate::objects::mesh::{
-    mesh_eval_face_normal, mesh_eval_position, mesh_eval_velocity, mesh_item_bound,
-    mesh_query_aabb, mesh_query_aabb_done, mesh_query_aabb_item, mesh_query_aabb_next,
+    mesh_eval_face_normal, mesh_eval_position, mesh_eval_velocity, mesh_query_aabb,
+    mesh_query_aabb_done, mesh_query_aabb_item, mesh_query_aabb_next,
 };
 
 /// A point query's result as the kernel language binds it: `(result, sign, face, u, v)`.

@@ -57,13 +57,12 @@ pub use atomic::*;
 pub use euler::{quat_from_euler, quat_to_euler, EulerAngles, EulerOps};
 pub use expect::{expect_eq, expect_near, expect_neq, Near};
 pub use geometry::{
-    bvh_item_bound, bvh_query_aabb, bvh_query_aabb_done, bvh_query_aabb_item, bvh_query_aabb_next,
-    bvh_query_ray, bvh_query_ray_done, bvh_query_ray_item, bvh_query_ray_next,
-    closest_point_triangle, intersect_tri_tri, mesh_eval_face_normal, mesh_eval_position,
-    mesh_eval_velocity, mesh_item_bound, mesh_query_aabb, mesh_query_aabb_done,
-    mesh_query_aabb_item, mesh_query_aabb_next, mesh_query_furthest_point_no_sign,
-    mesh_query_point, mesh_query_point_no_sign, mesh_query_point_sign_normal,
-    mesh_query_point_sign_parity, mesh_query_ray,
+    bvh_query_aabb, bvh_query_aabb_done, bvh_query_aabb_item, bvh_query_aabb_next, bvh_query_ray,
+    bvh_query_ray_done, bvh_query_ray_item, bvh_query_ray_next, closest_point_triangle,
+    intersect_tri_tri, mesh_eval_face_normal, mesh_eval_position, mesh_eval_velocity,
+    mesh_query_aabb, mesh_query_aabb_done, mesh_query_aabb_item, mesh_query_aabb_next,
+    mesh_query_furthest_point_no_sign, mesh_query_point, mesh_query_point_no_sign,
+    mesh_query_point_sign_normal, mesh_query_point_sign_parity, mesh_query_ray,
 };
 pub use linalg::*;
 pub use math::*;

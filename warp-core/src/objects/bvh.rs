@@ -642,14 +642,6 @@ pub fn bvh_query_aabb_next(bvh: BvhView, mut q: BvhQueryAabb) -> KResult<BvhQuer
     Ok(q)
 }
 
-/// Every primitive a box or ray query of `bvh` yields is below this, the primitive count
-/// (the walk checks each id it reads): what the kernel language's query loops check their
-/// arrays against once.
-#[inline(always)]
-pub fn bvh_item_bound(bvh: BvhView) -> usize {
-    bvh.tree.num_prims()
-}
-
 /// Whether the box query has no more primitives.
 #[inline(always)]
 pub fn bvh_query_aabb_done(q: BvhQueryAabb) -> bool {

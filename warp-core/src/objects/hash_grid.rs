@@ -335,14 +335,6 @@ fn bucket_at(dims: [i32; 3], q: &HashGridQuery) -> i32 {
     (z * dims[1] + y) * dims[0] + x
 }
 
-/// Every candidate a query of `grid` yields is below this, the point count
-/// ([`hash_grid_query_next`] checks each): what the kernel language's query loops check their
-/// arrays against once.
-#[inline(always)]
-pub fn hash_grid_item_bound(grid: HashGridView) -> usize {
-    grid.point_ids.len()
-}
-
 /// Whether the query has no more candidates.
 #[inline(always)]
 pub fn hash_grid_query_done(q: HashGridQuery) -> bool {

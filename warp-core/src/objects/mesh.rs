@@ -951,13 +951,6 @@ pub fn mesh_query_aabb_done(q: MeshQueryAabb) -> bool {
     q.walk.done()
 }
 
-/// Every face a box query of `mesh` yields is below this, the face count (the walk checks each
-/// id it reads): what the kernel language's query loops check their arrays against once.
-#[inline(always)]
-pub fn mesh_item_bound(mesh: MeshView) -> usize {
-    mesh.tree.num_prims()
-}
-
 /// The mesh box query's current face.
 #[inline(always)]
 pub fn mesh_query_aabb_item(q: MeshQueryAabb) -> i32 {

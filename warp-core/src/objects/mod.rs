@@ -58,8 +58,8 @@ pub mod builtins {
         bsr_row_done, bsr_row_index, bsr_row_item, bsr_row_next, bsr_set_block,
     };
     pub use super::hash_grid::{
-        hash_grid_item_bound, hash_grid_point_id, hash_grid_query, hash_grid_query_done,
-        hash_grid_query_next, hash_grid_query_point,
+        hash_grid_point_id, hash_grid_query, hash_grid_query_done, hash_grid_query_next,
+        hash_grid_query_point,
     };
 }
 

@@ -771,7 +771,7 @@ impl<'a> Emitter<'a> {
                 let arrays = crate::analysis::loop_indexed_params(self.f, body, j);
                 self.tmp += 1;
                 let flag = format!("__inb{}", self.tmp);
-                let n = format!("wp::{bound}({})", self.var(object));
+                let n = format!("{bound}({})", self.var(object));
                 let conds: Vec<String> = arrays
                     .iter()
                     .map(|a| format!("wp::range_inside({}, (wp::i64)0, {n})", self.var(*a)))

@@ -25,9 +25,6 @@ pub struct RustEmitter<'a> {
     /// Printing a tiled kernel's lane region (`back::rust_tile`): a `return` ends this lane's
     /// part of the block, not the block.
     pub in_lanes: std::cell::Cell<bool>,
-    /// Inside the unchecked copy of a query loop (`query_loop`): loads of these arrays at
-    /// exactly these variables skip their checks.
-    query_unchecked: std::cell::RefCell<Vec<(VarId, VarId)>>,
 }
 
 impl<'a> RustEmitter<'a> {
@@ -37,56 +34,7 @@ impl<'a> RustEmitter<'a> {
             tid: crate::analysis::tid_components(f),
             replay: false,
             in_lanes: std::cell::Cell::new(false),
-            query_unchecked: Default::default(),
         }
-    }
-
-    /// A query loop whose items are below a bound of the object (`next` checks each:
-    /// `analysis::bounded_query_loop`) and whose body indexes 1-D array parameters at its
-    /// variable: printed twice, and one check before the loop that every such array holds
-    /// `bound` elements picks the copy whose loads of them skip their checks (as the CUDA
-    /// emitter does). Stores keep theirs (the race check logs each one). Not in an adjoint's
-    /// replay, nor in a tiled kernel's lanes, and one level deep (each level doubles the code).
-    fn query_loop(&self, body: &Block, sp: Span) -> Option<TokenStream> {
-        if self.replay || self.in_lanes.get() || !self.query_unchecked.borrow().is_empty() {
-            return None;
-        }
-        let (object, j, bound) = crate::analysis::bounded_query_loop(self.f, body)?;
-        let arrays = crate::analysis::loop_indexed_params(self.f, body, j);
-        if arrays.is_empty() {
-            return None;
-        }
-        let obj = self.var(object);
-        let bound = format_ident!("{}", bound);
-        let covers = arrays.iter().map(|a| {
-            let a = self.var(*a);
-            quote_spanned!(sp=> #a.len() >= __bound)
-        });
-        self.query_unchecked
-            .borrow_mut()
-            .extend(arrays.iter().map(|a| (*a, j)));
-        let fast = self.block(body);
-        self.query_unchecked.borrow_mut().clear();
-        let checked = self.block(body);
-        Some(quote_spanned! {sp=>
-            {
-                let __bound: usize = __wp::builtins::#bound(#obj);
-                if true #(&& #covers)* {
-                    loop { #fast }
-                } else {
-                    loop { #checked }
-                }
-            }
-        })
-    }
-
-    /// Whether a load of `array` at `index` is in the unchecked copy of a query loop and
-    /// indexed by its variable: then `index < bound <= array.len()`.
-    fn query_load_unchecked(&self, array: VarId, index: &[VarId]) -> bool {
-        self.query_unchecked
-            .borrow()
-            .iter()
-            .any(|(a, v)| *a == array && index == [*v])
     }
 
     /// Accesses indexed by the thread index skip their per-thread check when the launch has
@@ -178,9 +126,6 @@ impl<'a> RustEmitter<'a> {
             }
             StmtKind::For { .. } => self.for_loop(s, &|b| self.block(b)),
             StmtKind::Loop { body } => {
-                if let Some(t) = self.query_loop(body, sp) {
-                    return t;
-                }
                 let body = self.block(body);
                 quote_spanned!(sp=> loop { #body })
             }
@@ -468,11 +413,7 @@ impl<'a> RustEmitter<'a> {
             Op::Load { array, index } => {
                 let a = self.var(*array);
                 let idx = self.index(index);
-                if self.query_load_unchecked(*array, index) {
-                    // SAFETY (of the generated code): the query yields only items below the
-                    // bound, which the check before the loop found within the array.
-                    quote_spanned!(sp=> (unsafe { #a.load_unchecked(#idx) }))
-                } else if self.fast(*array, index) {
+                if self.fast(*array, index) {
                     quote_spanned!(sp=> (if __FAST { unsafe { #a.load_unchecked(#idx) } } else { #a.load(#idx)? }))
                 } else {
                     quote_spanned!(sp=> #a.load(#idx)?)

@@ -15,12 +15,11 @@ pub struct Iterate {
     pub done: &'static str,
     /// `(state) -> item`: the candidate the loop variable takes.
     pub item: &'static str,
-    /// The function of the object (`hash_grid_item_bound(grid)`: `wp::` on CUDA,
-    /// `warp_core::builtins::` on the CPU) whose value every item is below, with items never
-    /// negative: `next` checks each item it yields (a fault, and the end of the query,
-    /// otherwise). Then one check before the loop that a 1-D array holds that many elements
-    /// covers every access of it at the loop variable (both forward emitters' unswitched query
-    /// loops). `None` when items are not checked so.
+    /// The CUDA function of the object (`wp::hash_grid_item_bound(grid)`) whose value every
+    /// item is below, with items never negative: `next` checks each item it yields (a fault,
+    /// and the end of the query, otherwise). Then one check before the loop that a 1-D array
+    /// holds that many elements covers every access of it at the loop variable (the forward
+    /// CUDA emitter's unswitched query loop). `None` when items are not checked so.
     pub bound: Option<&'static str>,
 }
 

@@ -13,7 +13,7 @@ pub(super) const ROWS: &[Builtin] = rows! {
     // and the body's reads get their gradients. Indices are `usize` (Warp's `int`).
     "hash_grid_query": NO_T, (GRID, VEC3, F32) -> GRID_QUERY, "hash_grid", Zero,
         iterate("hash_grid_query_next", "hash_grid_query_done", "hash_grid_query_point"),
-        item_bound("hash_grid_item_bound");
+        item_bound("wp::hash_grid_item_bound");
     "hash_grid_query_next": NO_T, (GRID, GRID_QUERY) -> GRID_QUERY, "hash_grid", Zero, internal;
     "hash_grid_query_done": NO_T, (GRID_QUERY) -> BOOL, "hash_grid", Zero, internal;
     "hash_grid_query_point": NO_T, (GRID_QUERY) -> USIZE, "hash_grid", Zero, internal;
@@ -26,19 +26,19 @@ pub(super) const ROWS: &[Builtin] = rows! {
     // evaluations' give `u`'s and `v`'s; the objects get none.
     "bvh_query_aabb": NO_T, (BVH, VEC3, VEC3) -> BVH_AABB, "bvh", Zero,
         iterate("bvh_query_aabb_next", "bvh_query_aabb_done", "bvh_query_aabb_item"),
-        item_bound("bvh_item_bound");
+        item_bound("wp::bvh_item_bound");
     "bvh_query_aabb_next": NO_T, (BVH, BVH_AABB) -> BVH_AABB, "bvh", Zero, internal;
     "bvh_query_aabb_done": NO_T, (BVH_AABB) -> BOOL, "bvh", Zero, internal;
     "bvh_query_aabb_item": NO_T, (BVH_AABB) -> I32, "bvh", Zero, internal;
     "bvh_query_ray": NO_T, (BVH, VEC3, VEC3) -> BVH_RAY, "bvh", Zero,
         iterate("bvh_query_ray_next", "bvh_query_ray_done", "bvh_query_ray_item"),
-        item_bound("bvh_item_bound");
+        item_bound("wp::bvh_item_bound");
     "bvh_query_ray_next": NO_T, (BVH, BVH_RAY) -> BVH_RAY, "bvh", Zero, internal;
     "bvh_query_ray_done": NO_T, (BVH_RAY) -> BOOL, "bvh", Zero, internal;
     "bvh_query_ray_item": NO_T, (BVH_RAY) -> I32, "bvh", Zero, internal;
     "mesh_query_aabb": NO_T, (MESH, VEC3, VEC3) -> MESH_AABB, "mesh", Zero,
         iterate("mesh_query_aabb_next", "mesh_query_aabb_done", "mesh_query_aabb_item"),
-        item_bound("mesh_item_bound");
+        item_bound("wp::mesh_item_bound");
     "mesh_query_aabb_next": NO_T, (MESH, MESH_AABB) -> MESH_AABB, "mesh", Zero, internal;
     "mesh_query_aabb_done": NO_T, (MESH_AABB) -> BOOL, "mesh", Zero, internal;
     "mesh_query_aabb_item": NO_T, (MESH_AABB) -> I32, "mesh", Zero, internal;
