@@ -34,7 +34,7 @@
 
 use glam::Vec3;
 
-use crate::{ArrayView, KResult, KernelIndex};
+use crate::{ArrayView, Fault, FaultKind, KResult, KernelIndex};
 
 /// A built hash grid as a kernel thread sees it: the point indices in bucket order (a checked
 /// view, whose names its faults carry), each bucket's start and end in that order, the bucket
@@ -73,6 +73,22 @@ impl std::fmt::Debug for HashGridView {
 }
 
 impl HashGridView {
+    /// The out-of-bounds fault of the grid's points at `id`, a candidate that is not a point
+    /// index (what a read of the points at `id` reports).
+    #[cold]
+    #[inline(never)]
+    fn not_a_point(&self, id: i32) -> Box<Fault> {
+        let (kernel, arg) = self.point_ids.names();
+        Fault::new(
+            kernel,
+            FaultKind::OutOfBounds {
+                arg,
+                index: vec![id as i128],
+                shape: vec![self.point_ids.len()],
+            },
+        )
+    }
+
     /// A view of a grid's buffers: `point_ids` (the point indices in bucket order),
     /// `cell_starts` and `cell_ends` (one entry per bucket, `dims[0] * dims[1] * dims[2]`,
     /// contiguous), and `1 / cell width`. Inconsistent contents make faults, never undefined
@@ -279,10 +295,12 @@ pub fn hash_grid_query_next(grid: HashGridView, mut q: HashGridQuery) -> KResult
             // below (states are made and changed only by these functions).
             let id = unsafe { grid.point_ids.load_unchecked(q.next as usize) };
             q.next += 1;
+            // Every candidate is a point index, which the CUDA emitter's query loops rely on.
+            // The fault is made out of line: with the error built in the candidate's path
+            // (`point_ids.load(id)?`), the DEM example's CPU frame executed 17% more
+            // instructions than without the check (callgrind); out of line, 2.7% more.
             if (id as u32) >= grid.point_ids.len() as u32 {
-                // Not a point index: the out-of-bounds fault of the grid's points at the id
-                // (every candidate is one, which the CUDA emitter's query loops rely on).
-                grid.point_ids.load(id)?;
+                return Err(grid.not_a_point(id));
             }
             q.point = id;
             return Ok(q);
