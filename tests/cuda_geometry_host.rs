@@ -200,6 +200,9 @@ int main(int argc, char** argv) {
           bvh_query_aabb_t q = bvh_query_aabb(bvh, x, y, &c);
           for (;;) {
             q = bvh_query_aabb_next(bvh, q, &c);
+            // A GPU thread goes on after a fault: the walk must have ended (Rust never
+            // prints this, so the line would not match).
+            if (c.raised && !bvh_query_aabb_done(q)) printf(" not-ended");
             if (c.raised || bvh_query_aabb_done(q) || n >= 100000) break;
             printf(" %d", bvh_query_aabb_item(q)); ++n;
           }
@@ -211,6 +214,7 @@ int main(int argc, char** argv) {
           bvh_query_ray_t q = bvh_query_ray(bvh, x, y, &c);
           for (;;) {
             q = bvh_query_ray_next(bvh, q, &c);
+            if (c.raised && !bvh_query_ray_done(q)) printf(" not-ended");
             if (c.raised || bvh_query_ray_done(q) || n >= 100000) break;
             printf(" %d", bvh_query_ray_item(q)); ++n;
           }
@@ -293,6 +297,7 @@ int main(int argc, char** argv) {
         mesh_query_aabb_t q = mesh_query_aabb(mesh, x, y, &c);
         for (;;) {
           q = mesh_query_aabb_next(mesh, q, &c);
+          if (c.raised && !mesh_query_aabb_done(q)) printf(" not-ended");
           if (c.raised || mesh_query_aabb_done(q) || n >= 100000) break;
           printf(" %d", mesh_query_aabb_item(q)); ++n;
         }

@@ -235,19 +235,31 @@ WP_LFN bool bvh_escape(const bvh_tree_t& t, i32 i, i32* out) {
   return e >= 0;
 }
 
+/// The walk at its end (no primitive; it stays there).
+WP_LFN bvh_walk_t bvh_walk_ended(bvh_walk_t w) {
+  w.node = WP_BVH_WALK_END;
+  w.next = 0;
+  w.end = 0;
+  w.item = -1;
+  return w;
+}
+
 /// Walk::next: advances w to the next primitive `prim_test(id, ctx)` accepts, in a leaf whose
 /// box and whose ancestors' boxes `node_test(lower, upper)` accepts; or to the end. Once done
-/// it stays done. On a fault it returns with ctx->raised set.
+/// it stays done. On a fault it returns the ended walk with ctx->raised set: the CPU's walk
+/// stops at its fault, and a GPU thread goes on, so a walk that kept its state would hand the
+/// kernel's loop its last primitive again, and a fault at a primitive (which takes no move)
+/// would repeat at every call, for ever.
 template <typename NodeTest, typename PrimTest>
 WP_FN bvh_walk_t bvh_walk_next(bvh_walk_t w, const bvh_tree_t& t, NodeTest node_test,
                                PrimTest prim_test, ctx_t* ctx) {
   for (;;) {
     while (w.next < w.end) {
       const i32 id = bvh_prim<true>(t, w.next, ctx);
-      if (faulted(ctx)) return w;
+      if (faulted(ctx)) return bvh_walk_ended(w);
       w.next += 1;
       const bool ok = prim_test(id, ctx);
-      if (faulted(ctx)) return w;
+      if (faulted(ctx)) return bvh_walk_ended(w);
       if (ok) {
         w.item = id;
         return w;
@@ -266,27 +278,21 @@ WP_FN bvh_walk_t bvh_walk_next(bvh_walk_t w, const bvh_tree_t& t, NodeTest node_
     }
     // Down from n to the next accepted leaf, past rejected subtrees by their escapes.
     for (;;) {
-      if (!has) {
-        w.node = WP_BVH_WALK_END;
-        w.next = 0;
-        w.end = 0;
-        w.item = -1;
-        return w;
-      }
+      if (!has) return bvh_walk_ended(w);
       w.steps += 1u;
       if (w.steps > bvh_max_steps(t)) {
         has = false;
         continue;
       }
       const bvh_node_t node = bvh_node<true>(t, n, ctx);
-      if (faulted(ctx)) return w;
+      if (faulted(ctx)) return bvh_walk_ended(w);
       if (!node_test(bvh_node_lower(node), bvh_node_upper(node))) {
         const i32 i = n;
         has = bvh_escape(t, i, &n);
       } else if (node.left < 0) {
         i32 start, end;
         bvh_leaf_range<true>(t, node, &start, &end, ctx);
-        if (faulted(ctx)) return w;
+        if (faulted(ctx)) return bvh_walk_ended(w);
         w.node = n;
         w.next = start;
         w.end = end;
