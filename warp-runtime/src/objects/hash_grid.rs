@@ -224,7 +224,9 @@ impl HashGrid {
     }
 
     /// The point indices of the last build in bucket order (what `hash_grid_point_id(grid, i)`
-    /// returns for each `i`), a view of the grid's buffer: the next build overwrites it.
+    /// returns for each `i`), a view of the grid's buffer: the next build overwrites it. A
+    /// value written there that is not a point index makes a query that meets it fault (an
+    /// out-of-bounds fault of the grid at that value).
     pub fn point_ids(&self) -> Option<Array<i32>> {
         let b = self.built?;
         self.buffers.point_ids.view(0..b.num_points).ok()
