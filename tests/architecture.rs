@@ -1810,6 +1810,19 @@ const WARP_CORE_ALLOCATES: &[(&str, &[&str], Why, &str)] = &[
         "an out-of-bounds node or primitive index of a BVH",
     ),
     (
+        "warp-core/src/objects/hash_grid.rs",
+        &["not_a_point"],
+        Why::Fault,
+        "a hash grid candidate that is not a point index, with the id and the point count",
+    ),
+    (
+        "warp-core/src/objects/bvh.rs",
+        &["preorder_escapes"],
+        Why::Host,
+        "the escape links of a built tree (the vector and its work list): builders call it \
+         once per build, on the host, beside the layout it computes them from",
+    ),
+    (
         "warp-core/src/objects/volume.rs",
         &["non_finite"],
         Why::Fault,
