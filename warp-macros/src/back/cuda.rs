@@ -532,6 +532,42 @@ impl<'a> Emitter<'a> {
         self.out.push_str("}\n");
     }
 
+    /// A loop `head { body }` whose accesses of `arrays` at exactly `var` are in bounds when
+    /// `inside(array)` holds for each (printed as a C++ condition): `flag` is set to that
+    /// before the loop, and the loop is emitted twice, without those accesses' checks when
+    /// `flag` holds, with them otherwise. Past [`MAX_UNSWITCH_DEPTH`] nested copies (each
+    /// doubles the code), one copy tests `flag` at each access instead.
+    #[allow(clippy::too_many_arguments)]
+    fn unswitched_loop(
+        &mut self,
+        sp: proc_macro2::Span,
+        head: &str,
+        body: &Block,
+        var: VarId,
+        arrays: &[VarId],
+        flag: &str,
+        inside: impl Fn(&str) -> String,
+    ) -> Result<(), String> {
+        let conds: Vec<String> = arrays.iter().map(|a| inside(&self.var(*a))).collect();
+        self.line(sp, &format!("const bool {flag} = {};", conds.join(" && ")));
+        if self.unswitched >= MAX_UNSWITCH_DEPTH {
+            return self.native_loop(sp, head, body, var, arrays, flag);
+        }
+        self.unswitched += 1;
+        self.line(sp, &format!("if ({flag}) {{"));
+        self.indent += 1;
+        let fast = self.native_loop(sp, head, body, var, arrays, "");
+        self.indent -= 1;
+        self.line(sp, "} else {");
+        self.indent += 1;
+        let checked = self.native_loop(sp, head, body, var, &[], "");
+        self.indent -= 1;
+        self.unswitched -= 1;
+        fast.and(checked)?;
+        self.close();
+        Ok(())
+    }
+
     /// A native loop `head { body }` in which accesses of `arrays` at exactly `var` skip
     /// their checks when `flag` holds (always, for an empty flag).
     fn native_loop(
@@ -686,27 +722,8 @@ impl<'a> Emitter<'a> {
                 if arrays.is_empty() {
                     return self.native_loop(sp, &head, body, *var, &[], "");
                 }
-                let flag = format!("__inb{k}");
-                let conds: Vec<String> = arrays
-                    .iter()
-                    .map(|a| format!("wp::range_inside({}, {s0}, {e0})", self.var(*a)))
-                    .collect();
-                self.line(sp, &format!("const bool {flag} = {};", conds.join(" && ")));
-                if self.unswitched >= MAX_UNSWITCH_DEPTH {
-                    return self.native_loop(sp, &head, body, *var, &arrays, &flag);
-                }
-                self.unswitched += 1;
-                self.line(sp, &format!("if ({flag}) {{"));
-                self.indent += 1;
-                let fast = self.native_loop(sp, &head, body, *var, &arrays, "");
-                self.indent -= 1;
-                self.line(sp, "} else {");
-                self.indent += 1;
-                let checked = self.native_loop(sp, &head, body, *var, &[], "");
-                self.indent -= 1;
-                self.unswitched -= 1;
-                fast.and(checked)?;
-                self.close();
+                let inside = |a: &str| format!("wp::range_inside({a}, {s0}, {e0})");
+                self.unswitched_loop(sp, &head, body, *var, &arrays, &format!("__inb{k}"), inside)?;
             }
             StmtKind::For { var, range, body } => {
                 self.tmp += 1;
@@ -758,45 +775,26 @@ impl<'a> Emitter<'a> {
             // variable holds that many elements covers all those accesses, as a native loop's
             // range check does, and the loop is emitted twice in the same way. Forward only:
             // the adjoint's replay keeps its single, checked copy.
-            StmtKind::Loop { body }
-                if !self.replay
-                    && crate::analysis::bounded_query_loop(self.f, body).is_some_and(
-                        |(_, j, _)| {
-                            !crate::analysis::loop_indexed_params(self.f, body, j).is_empty()
-                        },
-                    ) =>
-            {
-                let (object, j, bound) =
-                    crate::analysis::bounded_query_loop(self.f, body).expect("matched");
-                let arrays = crate::analysis::loop_indexed_params(self.f, body, j);
+            StmtKind::Loop { body } => {
+                let query = (!self.replay)
+                    .then(|| crate::analysis::bounded_query_loop(self.f, body))
+                    .flatten()
+                    .map(|(object, j, bound)| {
+                        let arrays = crate::analysis::loop_indexed_params(self.f, body, j);
+                        (object, j, bound, arrays)
+                    })
+                    .filter(|(.., arrays)| !arrays.is_empty());
+                let Some((object, j, bound, arrays)) = query else {
+                    self.line(sp, "for (;;) {");
+                    self.nested(body)?;
+                    self.close();
+                    return Ok(());
+                };
                 self.tmp += 1;
                 let flag = format!("__inb{}", self.tmp);
                 let n = format!("{bound}({})", self.var(object));
-                let conds: Vec<String> = arrays
-                    .iter()
-                    .map(|a| format!("wp::range_inside({}, (wp::i64)0, {n})", self.var(*a)))
-                    .collect();
-                self.line(sp, &format!("const bool {flag} = {};", conds.join(" && ")));
-                if self.unswitched >= MAX_UNSWITCH_DEPTH {
-                    return self.native_loop(sp, "for (;;) {", body, j, &arrays, &flag);
-                }
-                self.unswitched += 1;
-                self.line(sp, &format!("if ({flag}) {{"));
-                self.indent += 1;
-                let fast = self.native_loop(sp, "for (;;) {", body, j, &arrays, "");
-                self.indent -= 1;
-                self.line(sp, "} else {");
-                self.indent += 1;
-                let checked = self.native_loop(sp, "for (;;) {", body, j, &[], "");
-                self.indent -= 1;
-                self.unswitched -= 1;
-                fast.and(checked)?;
-                self.close();
-            }
-            StmtKind::Loop { body } => {
-                self.line(sp, "for (;;) {");
-                self.nested(body)?;
-                self.close();
+                let inside = |a: &str| format!("wp::range_inside({a}, (wp::i64)0, {n})");
+                self.unswitched_loop(sp, "for (;;) {", body, j, &arrays, &flag, inside)?;
             }
             StmtKind::ExitIf { .. } => {
                 return Err(
