@@ -464,6 +464,20 @@ fn k_count_near_first(grid: HashGrid, x: Array<Vec3>, r: f32, out: Array<i32>) {
     out[0] = c;
 }
 
+/// The grid the query-fault tests corrupt: points 0 and 1 in cell (0, 0, 0), bucket 0, and
+/// point 2 in (2, 2, 2), cells of width 1 in 4 x 4 x 4 buckets; with a count to write.
+fn three_point_grid(dev: &wp::Device) -> (Array<Vec3>, wp::HashGrid, Array<i32>) {
+    let pts = [
+        Vec3::new(0.1, 0.1, 0.1),
+        Vec3::new(0.2, 0.1, 0.1),
+        Vec3::new(2.5, 2.5, 2.5),
+    ];
+    let x = Array::from_slice(&pts, dev).unwrap();
+    let mut grid = wp::HashGrid::new(4, 4, 4, dev).unwrap();
+    grid.build(&x, 1.0).unwrap();
+    (x, grid, Array::<i32>::zeros(1, dev).unwrap())
+}
+
 /// A bucket start a kernel wrote below 0 after the build: a query entering that bucket
 /// faults as the out-of-bounds read of the grid's points there (the grid's parameter, index
 /// the start, shape the point count) on both backends, and the query ends (on a GPU the
@@ -471,15 +485,7 @@ fn k_count_near_first(grid: HashGrid, x: Array<Vec3>, r: f32, out: Array<i32>) {
 #[test]
 fn hash_grid_query_faults_on_a_corrupt_start() {
     on_every_backend("hash_grid_query_faults_on_a_corrupt_start", |dev| {
-        let pts = [
-            Vec3::new(0.1, 0.1, 0.1),
-            Vec3::new(0.2, 0.1, 0.1),
-            Vec3::new(2.5, 2.5, 2.5),
-        ];
-        let x = Array::from_slice(&pts, dev).unwrap();
-        let mut grid = wp::HashGrid::new(4, 4, 4, dev).unwrap();
-        grid.build(&x, 1.0).unwrap();
-        let out = Array::<i32>::zeros(1, dev).unwrap();
+        let (x, grid, out) = three_point_grid(dev);
         let (starts, ends) = grid.cell_ranges().unwrap();
         // Cell (0, 0, 0) is bucket 0 and holds points 0 and 1; (2, 2, 2) holds point 2.
         assert_eq!(
@@ -529,15 +535,7 @@ fn hash_grid_query_faults_on_a_corrupt_start() {
 #[test]
 fn hash_grid_query_faults_on_a_corrupt_point_id() {
     on_every_backend("hash_grid_query_faults_on_a_corrupt_point_id", |dev| {
-        let pts = [
-            Vec3::new(0.1, 0.1, 0.1),
-            Vec3::new(0.2, 0.1, 0.1),
-            Vec3::new(2.5, 2.5, 2.5),
-        ];
-        let x = Array::from_slice(&pts, dev).unwrap();
-        let mut grid = wp::HashGrid::new(4, 4, 4, dev).unwrap();
-        grid.build(&x, 1.0).unwrap();
-        let out = Array::<i32>::zeros(1, dev).unwrap();
+        let (x, grid, out) = three_point_grid(dev);
         let ids = grid.point_ids().unwrap();
         // Bucket 0 holds positions 0 and 1 of the ids (points 0 and 1).
         assert_eq!(&ids.to_vec().unwrap()[..2], &[0, 1]);
